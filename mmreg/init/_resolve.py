@@ -1,0 +1,68 @@
+"""Turn the ``init`` parameter of a registration estimator into initial labels."""
+
+import numpy as np
+from sklearn.base import clone
+
+from mmreg._validation import check_labels
+from mmreg.init._base import BaseInitializer
+
+__all__ = ["INIT_SHORTCUTS", "initial_labels"]
+
+
+def _shortcuts():
+    # Imported here so that a shortcut's module loads only when it is used.
+    from mmreg.init import DBSCANClustering, EuclideanClustering
+
+    return {
+        "euclidean": lambda: EuclideanClustering(n_clusters=100),
+        "dbscan": DBSCANClustering,
+    }
+
+
+INIT_SHORTCUTS = ("euclidean", "dbscan")
+
+
+def initial_labels(init, X, *, random_state=None):
+    """Initial clusters of the correspondences ``X = [a | b]``.
+
+    Parameters
+    ----------
+    init : str, clusterer or array-like of shape (n,)
+        ``"euclidean"`` (:class:`~mmreg.init.EuclideanClustering` with 100 clusters) or
+        ``"dbscan"`` (:class:`~mmreg.init.DBSCANClustering`); an mmreg initialiser, fitted
+        on ``X``; any other object with ``fit_predict`` (every scikit-learn clusterer),
+        fitted on the a-points ``X[:, :d]``; or precomputed labels, one per row of ``X``
+        (negative: in no cluster). Estimators are cloned, never fitted in place.
+    X : ndarray of shape (n, 2 * d)
+    random_state : int, RandomState instance or None
+        Given to a cloned clusterer whose own ``random_state`` is None, so that the
+        registration estimator's seed makes the whole fit reproducible.
+
+    Returns
+    -------
+    labels : ndarray of shape (n,)
+    """
+    n, n_columns = X.shape
+    if isinstance(init, str):
+        makers = _shortcuts()
+        if init not in makers:
+            raise ValueError(
+                f"init={init!r} is not a known shortcut; use one of {sorted(makers)}, "
+                "a clusterer with fit_predict, or an array of initial labels."
+            )
+        init = makers[init]()
+    if hasattr(init, "fit_predict"):
+        if isinstance(init, type):
+            raise TypeError(f"init must be an instance, not the class {init.__name__}.")
+        clusterer = clone(init)
+        params = clusterer.get_params(deep=False) if hasattr(clusterer, "get_params") else {}
+        if params.get("random_state", 0) is None and random_state is not None:
+            clusterer.set_params(random_state=random_state)
+        data = X if isinstance(clusterer, BaseInitializer) else X[:, : n_columns // 2]
+        return check_labels(clusterer.fit_predict(data), n, name="labels from init")
+    if isinstance(init, (list, tuple, np.ndarray)) or hasattr(init, "__array__"):
+        return check_labels(init, n, name="init labels")
+    raise TypeError(
+        "init must be a shortcut string, a clusterer with fit_predict, or an array of "
+        f"initial labels; got {type(init).__name__}."
+    )
