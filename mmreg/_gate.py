@@ -56,9 +56,7 @@ class ClusterGate:
         self._ball_radius = np.zeros(n_clusters)
         nonempty = counts > 0
         if nonempty.any():
-            self._ball_radius[nonempty] = np.maximum.reduceat(
-                spread, self._bounds[:-1][nonempty]
-            )
+            self._ball_radius[nonempty] = np.maximum.reduceat(spread, self._bounds[:-1][nonempty])
         self._ball_radius[~nonempty] = -np.inf
 
     def maybe_within(self, query):

@@ -64,7 +64,5 @@ def classify(a, b, rotations, translations, sigmas, weights, gate, own=None):
         scores = log_weighted_likelihood(
             a[block], b[block], rotations, translations, sigmas, weights
         )
-        labels[block] = gated_argmax(
-            scores, a[block], gate, None if own is None else own[block]
-        )
+        labels[block] = gated_argmax(scores, a[block], gate, None if own is None else own[block])
     return labels

@@ -27,7 +27,7 @@ def split_correspondences(X):
     if n_columns % 2:
         raise ValueError(
             "X must hold stacked correspondences [a | b] with an even number of columns "
-            f"2*d (6 for 3-D points); got X with {n_columns} columns."
+            f"2*d (6 for 3-D points); got X with n_features = {n_columns}."
         )
     d = n_columns // 2
     return X[:, :d], X[:, d:]

@@ -28,7 +28,9 @@ def _unit_shape(shape, n, rng):
         return p
     if shape == "cylinder":
         angle = rng.uniform(0, 2 * np.pi, n)
-        return np.column_stack([0.3 * np.cos(angle), 0.3 * np.sin(angle), rng.uniform(-0.5, 0.5, n)])
+        return np.column_stack(
+            [0.3 * np.cos(angle), 0.3 * np.sin(angle), rng.uniform(-0.5, 0.5, n)]
+        )
     if shape == "torus":
         u, v = rng.uniform(0, 2 * np.pi, (2, n))
         r = 0.35 + 0.12 * np.cos(v)

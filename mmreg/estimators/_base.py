@@ -119,7 +119,9 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         """
         check_is_fitted(self, "labels_")
         _, a, b = self._validate_correspondences(X, reset=False)
-        gate = ClusterGate(self._cluster_points, self.labels_, self.n_clusters_, self._gate_radius())
+        gate = ClusterGate(
+            self._cluster_points, self.labels_, self.n_clusters_, self._gate_radius()
+        )
         return classify(
             a, b, self.rotations_, self.translations_, self.sigmas_, self.weights_, gate
         )

@@ -59,7 +59,9 @@ def fit_cluster_models(a, b, labels, n_clusters, sigma_floor):
     return rotations, translations, sigmas, weights, counts
 
 
-def multi_model_em(a, b, init_labels, *, tau=1.5, min_cluster_size=4, max_iter=10, sigma_floor=None):
+def multi_model_em(
+    a, b, init_labels, *, tau=1.5, min_cluster_size=4, max_iter=10, sigma_floor=None
+):
     """Classification-EM for multi-model registration (Algorithm 1).
 
     Parameters
@@ -90,6 +92,10 @@ def multi_model_em(a, b, init_labels, *, tau=1.5, min_cluster_size=4, max_iter=1
     n_iter = 0
     converged = False
     for _ in range(max_iter):
+        if n_clusters == 0:
+            # Nothing left to fit or to assign to: the labels cannot change any more.
+            converged = True
+            break
         n_iter += 1
         # Lines 2-7: pose, weight pi_j = |H_j| / n and sigma_j of every cluster.
         rotations, translations, sigmas, weights, counts = fit_cluster_models(
@@ -100,14 +106,16 @@ def multi_model_em(a, b, init_labels, *, tau=1.5, min_cluster_size=4, max_iter=1
         kept = np.flatnonzero(counts >= min_cluster_size)
         position = np.full(n_clusters, -1, dtype=np.intp)
         position[kept] = np.arange(len(kept))
-        own = np.where(labels >= 0, position[np.maximum(labels, 0)], -1)
+        own = np.full(len(labels), -1, dtype=np.intp)
+        own[labels >= 0] = position[labels[labels >= 0]]
         # Lines 8-9 and 15-18: E-step and classification M-step, gated by d_cluster < tau
         # measured against the clusters as they were when the poses were fitted.
         gate = ClusterGate(a, own, len(kept), tau)
         new = classify(
             a, b, rotations[kept], translations[kept], sigmas[kept], weights[kept], gate, own
         )
-        new_in_old_ids = np.where(new >= 0, kept[np.maximum(new, 0)], -1)
+        new_in_old_ids = np.full(len(new), -1, dtype=np.intp)
+        new_in_old_ids[new >= 0] = kept[new[new >= 0]]
         if np.array_equal(new_in_old_ids, labels):
             converged = True
             break
