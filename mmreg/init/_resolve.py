@@ -56,7 +56,7 @@ def initial_labels(init, X, *, random_state=None):
             raise TypeError(f"init must be an instance, not the class {init.__name__}.")
         clusterer = clone(init)
         params = clusterer.get_params(deep=False) if hasattr(clusterer, "get_params") else {}
-        if params.get("random_state", 0) is None and random_state is not None:
+        if random_state is not None and "random_state" in params and params["random_state"] is None:
             clusterer.set_params(random_state=random_state)
         data = X if isinstance(clusterer, BaseInitializer) else X[:, : n_columns // 2]
         return check_labels(clusterer.fit_predict(data), n, name="labels from init")
