@@ -1,0 +1,46 @@
+"""The paper's measures (Section V-B) as functions, scikit-learn scorers and tables.
+
+Functions of label arrays (``-1`` marks outliers) and motions ``(rotations,
+translations)`` of shapes ``(K, d, d)`` and ``(K, d)``:
+
+* :func:`iou_score` (higher is better), :func:`per_point_error`, :func:`rotation_error`
+  and :func:`translation_error` (lower is better), exactly as the paper defines them;
+* :func:`misclassification_error` (Hungarian matching) and
+  :func:`~sklearn.metrics.adjusted_rand_score`, the usual clustering view;
+* :func:`ground_truth_poses`: true motions by Horn's method on the true clusters;
+* scorers for ``GridSearchCV`` and ``cross_validate``, and :func:`evaluate`, which
+  tabulates several methods on several scenes as a :class:`pandas.DataFrame`.
+"""
+
+from sklearn.metrics import adjusted_rand_score
+
+from mmreg.metrics._clustering import iou_score, misclassification_error
+from mmreg.metrics._evaluate import evaluate
+from mmreg.metrics._point import chamfer_distance, per_point_error
+from mmreg.metrics._pose import ground_truth_poses, rotation_error, translation_error
+from mmreg.metrics._scorer import (
+    make_iou_scorer,
+    make_misclassification_scorer,
+    make_per_point_error_scorer,
+    make_rotation_error_scorer,
+    make_translation_error_scorer,
+    registration_scorers,
+)
+
+__all__ = [
+    "adjusted_rand_score",
+    "chamfer_distance",
+    "evaluate",
+    "ground_truth_poses",
+    "iou_score",
+    "make_iou_scorer",
+    "make_misclassification_scorer",
+    "make_per_point_error_scorer",
+    "make_rotation_error_scorer",
+    "make_translation_error_scorer",
+    "misclassification_error",
+    "per_point_error",
+    "registration_scorers",
+    "rotation_error",
+    "translation_error",
+]
