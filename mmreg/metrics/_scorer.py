@@ -49,10 +49,6 @@ __all__ = [
 ]
 
 
-def _per_point(X, labels_true, labels_pred, transforms_true, transforms_pred):
-    return per_point_error(X, labels_true, labels_pred, transforms_true, transforms_pred)
-
-
 def _rotation(X, labels_true, labels_pred, transforms_true, transforms_pred):
     return _pose_errors(labels_true, labels_pred, transforms_true, transforms_pred)[0]
 
@@ -146,7 +142,9 @@ def make_per_point_error_scorer(transforms_true=None):
         The estimated motions are the estimator's ``rotations_`` and ``translations_``,
         or fitted by Horn's method on its clusters if it has none.
     """
-    return _PoseErrorScorer("per_point_error", _per_point, _check_fixed_transforms(transforms_true))
+    return _PoseErrorScorer(
+        "per_point_error", per_point_error, _check_fixed_transforms(transforms_true)
+    )
 
 
 def make_rotation_error_scorer(transforms_true=None):
