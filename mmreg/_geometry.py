@@ -168,10 +168,10 @@ def squared_residuals_all(a, b, rotations, translations):
 
     Uses the expansion ``||b - R a - t||^2 = ||b||^2 + ||a||^2 + ||t||^2 - 2 b^T R a
     - 2 b.t + 2 a.(R^T t)`` so that the whole table is one matrix product of an
-    ``(n, d^2 + 2d)`` feature matrix with a ``(d^2 + 2d, K)`` motion matrix, instead of an
-    ``(n, K, d)`` temporary. The points are centred first, since the expansion loses about
-    ``eps * ||x||^2`` of absolute precision. Tiny negative values from rounding are
-    clipped to zero.
+    ``(n, d^2 + 2d + 2)`` feature matrix with a ``(d^2 + 2d + 2, K)`` motion matrix,
+    instead of an ``(n, K, d)`` temporary. The points are centred first, since the
+    expansion loses about ``eps * ||x||^2`` of absolute precision. Tiny negative values
+    from rounding are clipped to zero.
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
@@ -186,18 +186,23 @@ def squared_residuals_all(a, b, rotations, translations):
     a = a - mean_a
     b = b - mean_b
     translations = np.asarray(translations, dtype=float) + rotations @ mean_a - mean_b
-    features = np.empty((n, d * d + 2 * d))
+    # The squared norms ride along as two more columns, so that one product gives the
+    # whole table without further passes over it.
+    width = d * d + 2 * d + 2
+    features = np.empty((n, width))
     features[:, : d * d] = (b[:, :, None] * a[:, None, :]).reshape(n, d * d)
     features[:, d * d : d * d + d] = b
-    features[:, d * d + d :] = a
+    features[:, d * d + d : d * d + 2 * d] = a
+    features[:, -2] = np.einsum("ij,ij->i", a, a) + np.einsum("ij,ij->i", b, b)
+    features[:, -1] = 1.0
     k = len(rotations)
-    coefs = np.empty((d * d + 2 * d, k))
+    coefs = np.empty((width, k))
     coefs[: d * d] = -2.0 * rotations.reshape(k, d * d).T
     coefs[d * d : d * d + d] = -2.0 * translations.T
-    coefs[d * d + d :] = 2.0 * np.einsum("kji,kj->ik", rotations, translations)
+    coefs[d * d + d : d * d + 2 * d] = 2.0 * np.einsum("kji,kj->ik", rotations, translations)
+    coefs[-2] = 1.0
+    coefs[-1] = np.einsum("kj,kj->k", translations, translations)
     sq = features @ coefs
-    sq += (np.einsum("ij,ij->i", a, a) + np.einsum("ij,ij->i", b, b))[:, None]
-    sq += np.einsum("kj,kj->k", translations, translations)[None, :]
     np.maximum(sq, 0.0, out=sq)
     return sq
 
