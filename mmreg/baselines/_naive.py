@@ -84,7 +84,7 @@ class NaiveRegistration(BaseRegistration):
     >>> est = NaiveRegistration(init=np.repeat([0, 1, 2, 3], 25)).fit(X)
     >>> est.n_clusters_                           # the initial clusters, unchanged
     4
-    >>> np.round(est.translations_[est.labels_[0]], 6)
+    >>> np.round(est.translations_[est.labels_[0]], 6) + 0.0
     array([1., 0., 0.])
     """
 
