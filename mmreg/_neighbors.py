@@ -8,10 +8,16 @@ initialiser, the partition diagnostics and the checks of Definitions 1 and 2.
 
 import numpy as np
 from scipy import sparse
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
-__all__ = ["connected_labels", "cluster_components", "radius_graph"]
+__all__ = [
+    "cluster_components",
+    "connected_labels",
+    "minimum_spanning_forest",
+    "nearest_in_other_component",
+    "radius_graph",
+]
 
 
 def radius_graph(points, radius, *, tree=None):
@@ -89,3 +95,90 @@ def cluster_components(points, labels, radius, *, graph=None):
         return np.zeros(n_clusters, dtype=np.intp)
     distinct = np.unique(np.column_stack([labels[keep], comp[keep]]), axis=0)
     return np.bincount(distinct[:, 0], minlength=n_clusters)
+
+
+def minimum_spanning_forest(n_points, edges, lengths):
+    """Minimum spanning forest of an undirected graph given as a list of weighted edges.
+
+    Its edges of length ``<= r`` join exactly the points that the graph's edges of length
+    ``<= r`` join, for every ``r``: single linkage on the graph.
+
+    Parameters
+    ----------
+    n_points : int
+    edges : ndarray of shape (m, 2)
+        Point indices; direction, repeats and self-loops are allowed and ignored.
+    lengths : ndarray of shape (m,)
+        Non-negative edge lengths; zero (coincident points) is a real edge.
+
+    Returns
+    -------
+    edges : ndarray of shape (n_points - n_components, 2)
+    lengths : ndarray of shape (n_points - n_components,)
+        Sorted by increasing length.
+    """
+    edges = np.asarray(edges, dtype=np.intp).reshape(-1, 2)
+    lengths = np.asarray(lengths, dtype=float)
+    keep = edges[:, 0] != edges[:, 1]
+    edges, lengths = edges[keep], lengths[keep]
+    # csgraph reads a stored zero as "no edge", so zero lengths travel as the tiniest float.
+    tiny = np.finfo(float).tiny
+    weights = np.maximum(lengths, tiny)
+    shape = (n_points, n_points)
+    graph = sparse.csr_matrix((weights, (edges[:, 0], edges[:, 1])), shape=shape)
+    if graph.nnz < len(edges):
+        # The same (row, column) listed twice was summed; keep the shortest copy instead.
+        order = np.lexsort((weights, edges[:, 1], edges[:, 0]))
+        edges, weights = edges[order], weights[order]
+        first = np.ones(len(edges), dtype=bool)
+        first[1:] = np.any(edges[1:] != edges[:-1], axis=1)
+        graph = sparse.csr_matrix((weights[first], tuple(edges[first].T)), shape=shape)
+    tree = sparse.coo_matrix(minimum_spanning_tree(graph))
+    order = np.argsort(tree.data, kind="stable")
+    tree_lengths = np.where(tree.data[order] <= tiny, 0.0, tree.data[order])
+    return np.column_stack([tree.row[order], tree.col[order]]).astype(np.intp), tree_lengths
+
+
+def nearest_in_other_component(points, components, *, max_distance=np.inf):
+    """Each point's nearest neighbour among the points of the other components.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    components : ndarray of shape (n,)
+        Non-negative component of each point.
+    max_distance : float, default=inf
+        Neighbours farther than this are not reported.
+
+    Returns
+    -------
+    source, target : ndarray of shape (m,)
+        ``target[i]`` is the nearest point to ``source[i]`` outside its component, for
+        every point that has one within ``max_distance`` (inclusive).
+    distance : ndarray of shape (m,)
+
+    Notes
+    -----
+    Two different components differ in some bit of their (compacted) index, so querying,
+    for every bit, the points whose bit is 1 against a KD-tree of those whose bit is 0
+    (and vice versa) finds every point's nearest foreign neighbour: ``2 log2(c)`` trees
+    for ``c`` components, ``O(n log n log c)`` in all, never a list of all close pairs.
+    """
+    points = np.asarray(points, dtype=float)
+    _, components = np.unique(components, return_inverse=True)
+    n = len(points)
+    best = np.full(n, np.inf)
+    target = np.full(n, -1, dtype=np.intp)
+    # cKDTree's bound is strict; the next float up makes it inclusive.
+    bound = np.nextafter(max_distance, np.inf)
+    n_bits = int(components.max()).bit_length() if n else 0
+    for bit in range(n_bits):
+        side = ((components >> bit) & 1).astype(bool)
+        for mine, other in ((side, ~side), (~side, side)):
+            src, dst = np.flatnonzero(mine), np.flatnonzero(other)
+            dist, idx = cKDTree(points[dst]).query(points[src], k=1, distance_upper_bound=bound)
+            better = dist < best[src]
+            best[src[better]] = dist[better]
+            target[src[better]] = dst[idx[better]]
+    found = np.flatnonzero(target >= 0)
+    return found, target[found], best[found]

@@ -1,0 +1,200 @@
+"""EuclideanClustering: exact radius-graph components, the automatic radius, transform."""
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.distance import cdist
+
+from mmreg._neighbors import cluster_components, minimum_spanning_forest
+from mmreg.datasets import make_scene
+from mmreg.init import EuclideanClustering, euclidean_clustering
+
+
+def reference_labels(points, radius, min_cluster_size):
+    """Euclidean clusters from the dense distance matrix: the definition itself."""
+    adjacency = cdist(points, points) <= radius
+    _, components = connected_components(adjacency, directed=False)
+    sizes = np.bincount(components)
+    return np.where(sizes[components] >= min_cluster_size, components, -1)
+
+
+def same_partition(left, right):
+    """Equal up to renumbering, with -1 meaning the same on both sides."""
+    if not np.array_equal(left < 0, right < 0):
+        return False
+    keep = left >= 0
+    pairs = np.unique(np.column_stack([left[keep], right[keep]]), axis=0)
+    return len(pairs) == len(np.unique(left[keep])) == len(np.unique(right[keep]))
+
+
+@st.composite
+def point_sets(draw):
+    """Small clouds of a few blobs, with some points repeated exactly."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    d = draw(st.integers(1, 3))
+    n_blobs = draw(st.integers(1, 5))
+    n = draw(st.integers(2, 120))
+    centers = rng.uniform(-5, 5, size=(n_blobs, d))
+    points = centers[rng.integers(n_blobs, size=n)] + rng.normal(scale=0.5, size=(n, d))
+    n_copies = draw(st.integers(0, min(5, n - 1)))
+    points[:n_copies] = points[n - n_copies :]
+    return points
+
+
+@given(
+    points=point_sets(),
+    n_clusters=st.integers(1, 12),
+    min_cluster_size=st.integers(1, 4),
+    n_neighbors=st.sampled_from([1, 2, 6]),
+)
+def test_auto_radius_gives_exactly_the_radius_graph_components(
+    points, n_clusters, min_cluster_size, n_neighbors
+):
+    # n_neighbors=1 misses most radius-graph edges, so the repair and the Boruvka
+    # completion are exercised; the clusters must be exact whatever it is.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        labels, radius = euclidean_clustering(
+            points,
+            n_clusters=n_clusters,
+            min_cluster_size=min_cluster_size,
+            n_neighbors=n_neighbors,
+        )
+    assert same_partition(labels, reference_labels(points, radius, min_cluster_size))
+    # Numbered 0..K-1 in order of first point.
+    firsts = [np.flatnonzero(labels == j)[0] for j in range(labels.max() + 1)]
+    assert firsts == sorted(firsts)
+
+
+@given(points=point_sets(), radius=st.floats(0, 3), min_cluster_size=st.integers(1, 4))
+def test_explicit_radius_matches_definition(points, radius, min_cluster_size):
+    labels, used = euclidean_clustering(points, radius=radius, min_cluster_size=min_cluster_size)
+    assert used == radius
+    assert same_partition(labels, reference_labels(points, radius, min_cluster_size))
+
+
+@given(points=point_sets(), n_clusters=st.integers(1, 10))
+def test_count_is_met_when_reachable(points, n_clusters):
+    # With min_cluster_size=1 every component counts, and their number falls one by one
+    # as the radius grows, from n (distinct points) to 1.
+    n_distinct = len(np.unique(points, axis=0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        labels, _ = euclidean_clustering(points, n_clusters=n_clusters, min_cluster_size=1)
+    assert labels.max() + 1 == min(n_clusters, n_distinct)
+
+
+def test_minimum_spanning_forest_is_single_linkage():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(60, 2))
+    dist = cdist(points, points)
+    i, j = np.triu_indices(60, 1)
+    forest, lengths = minimum_spanning_forest(60, np.column_stack([i, j]), dist[i, j])
+    assert forest.shape == (59, 2) and np.all(np.diff(lengths) >= 0)
+    for radius in np.quantile(lengths, [0.2, 0.5, 0.9]):
+        _, expected = connected_components(dist <= radius, directed=False)
+        keep = lengths <= radius
+        adjacency = np.zeros((60, 60), dtype=bool)
+        adjacency[forest[keep, 0], forest[keep, 1]] = True
+        _, got = connected_components(adjacency, directed=False)
+        assert same_partition(got, expected)
+
+
+def test_minimum_spanning_forest_keeps_zero_length_and_shortest_repeat():
+    edges = np.array([[0, 1], [1, 0], [1, 2], [2, 1], [2, 3]])
+    lengths = np.array([0.0, 0.0, 5.0, 2.0, 1.0])
+    forest, forest_lengths = minimum_spanning_forest(4, edges, lengths)
+    assert forest_lengths.tolist() == [0.0, 1.0, 2.0]
+    assert sorted(map(sorted, forest.tolist())) == [[0, 1], [1, 2], [2, 3]]
+
+
+@pytest.mark.parametrize("n_clusters", [8, 30, 60])
+def test_cluster_count_on_scene(n_clusters):
+    scene = make_scene(n_objects=4, n_points=3000, noise=0.01, random_state=3)
+    init = EuclideanClustering(n_clusters=n_clusters, min_cluster_size=4).fit(scene.X)
+    assert init.n_clusters_ == n_clusters
+    assert same_partition(init.labels_, reference_labels(scene.a, init.radius_, 4))
+    # Each cluster lies inside one object, and is tau-connected for any tau >= radius_.
+    clustered = init.labels_ >= 0
+    pairs = np.unique(np.column_stack([init.labels_, scene.labels])[clustered], axis=0)
+    assert len(pairs) == n_clusters
+    pieces = cluster_components(scene.a, init.labels_, init.radius_)
+    assert np.all(pieces == 1)
+
+
+def test_fewer_clusters_than_separated_objects():
+    # The k-NN graph falls apart into the objects: the forest must be completed.
+    scene = make_scene(n_objects=5, n_points=1000, random_state=0)
+    init = EuclideanClustering(n_clusters=2, min_cluster_size=1).fit(scene.X)
+    assert init.n_clusters_ == 2
+    assert init.radius_ > 2.0  # the objects are more than `separation` apart
+    assert same_partition(init.labels_, reference_labels(scene.a, init.radius_, 1))
+
+
+def test_unreachable_count_warns_and_uses_best_radius():
+    points = np.array([[0.0], [1.0], [3.0], [6.0]])
+    X = np.hstack([points, points])
+    with pytest.warns(UserWarning, match="No radius gives n_clusters=3"):
+        init = EuclideanClustering(n_clusters=3, min_cluster_size=2).fit(X)
+    # Never more than one component of two points: the largest radius with one is used.
+    assert init.n_clusters_ == 1
+    assert init.labels_.tolist() == [0, 0, 0, 0]
+
+
+def test_small_components_are_unassigned():
+    points = np.array([[0.0, 0], [0.1, 0], [0.2, 0], [3, 0], [3.1, 0], [9, 9]])
+    X = np.hstack([points, points])
+    init = EuclideanClustering(radius=0.5, min_cluster_size=3).fit(X)
+    assert init.labels_.tolist() == [0, 0, 0, -1, -1, -1]
+    assert init.n_clusters_ == 1 and init.radius_ == 0.5
+
+
+def test_single_point_and_coincident_points():
+    X = np.zeros((1, 6))
+    assert EuclideanClustering(min_cluster_size=1).fit(X).labels_.tolist() == [0]
+    assert EuclideanClustering(min_cluster_size=2).fit(X).labels_.tolist() == [-1]
+    X = np.zeros((5, 6))
+    init = EuclideanClustering(n_clusters=3, min_cluster_size=1)
+    with pytest.warns(UserWarning, match="No radius"):
+        assert init.fit(X).labels_.tolist() == [0] * 5
+
+
+def test_transform_is_membership_and_assigns_new_points():
+    scene = make_scene(n_objects=3, n_points=600, random_state=0)
+    init = EuclideanClustering(n_clusters=10, min_cluster_size=5)
+    membership = init.fit_transform(scene.X)
+    assert membership.shape == (600, init.n_clusters_)
+    assert membership.format == "csr"
+    expected = np.zeros((600, init.n_clusters_))
+    rows = np.flatnonzero(init.labels_ >= 0)
+    expected[rows, init.labels_[rows]] = 1
+    np.testing.assert_array_equal(membership.toarray(), expected)
+    np.testing.assert_array_equal(init.transform(scene.X).toarray(), expected)
+    # A new point next to a clustered one joins its cluster; one far away joins none.
+    i = rows[0]
+    near = scene.X[[i]].copy()
+    near[0, 0] += 0.1 * init.radius_
+    far = scene.X[[i]] + 100.0
+    new = init.transform(np.vstack([near, far])).toarray()
+    assert new[0].tolist() == expected[i].tolist()
+    assert new[1].sum() == 0
+
+
+def test_bad_input():
+    X = make_scene(n_objects=2, n_points=50, random_state=0).X
+    with pytest.raises(ValueError, match="even number of columns"):
+        EuclideanClustering().fit(X[:, :5])
+    with pytest.raises(ValueError, match="n_clusters or radius"):
+        EuclideanClustering(n_clusters=None).fit(X)
+    with pytest.raises(ValueError, match="n_clusters"):
+        EuclideanClustering(n_clusters=0).fit(X)
+    with pytest.raises(ValueError, match="radius"):
+        EuclideanClustering(radius=-1.0).fit(X)
+    init = EuclideanClustering(n_clusters=2).fit(X)
+    with pytest.raises(ValueError, match="features"):
+        init.transform(X[:, :4])
