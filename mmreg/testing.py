@@ -44,6 +44,8 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
 
 __all__ = [
     "OUTLIER_LABELLINGS",
+    "Clustering",
+    "Scene",
     "good_clusterings",
     "ground_truth_scenes",
     "rotations",
@@ -125,6 +127,33 @@ def _outliers(a, n_outliers, tau, margin, rng):
     return np.vstack(found)[:n_outliers]
 
 
+class Scene(Bunch):
+    """A drawn scene: a :class:`~sklearn.utils.Bunch` with a short summary as its repr.
+
+    Hypothesis prints the repr of failing examples; the arrays would drown it.
+    """
+
+    def __repr__(self):
+        counts = np.bincount(self.labels[self.labels >= 0]).tolist()
+        angles = np.degrees(Rotation.from_matrix(self.rotations).magnitude())
+        return (
+            f"Scene(shapes={self.shapes}, points={counts}, "
+            f"outliers={int(np.sum(self.labels < 0))}, tau={self.tau:.4g}, "
+            f"sigma={self.sigma:.4g}, gap={self.gap:.4g}, "
+            f"angles={np.round(angles, 1).tolist()})"
+        )
+
+
+class Clustering(Bunch):
+    """A drawn initial clustering, with a short summary as its repr."""
+
+    def __repr__(self):
+        return (
+            f"Clustering(alpha={self.alpha:.4g}, m0={self.m0}, "
+            f"pieces per object={self.n_pieces.tolist()}, outliers={self.outliers!r})"
+        )
+
+
 def _range(value):
     return (value, value) if np.isscalar(value) else tuple(value)
 
@@ -164,10 +193,10 @@ def ground_truth_scenes(
     Returns
     -------
     strategy
-        Draws :class:`~sklearn.utils.Bunch` objects with ``X`` (n, 6), ``a``, ``b``,
-        ``labels`` (``-1``: outlier), ``rotations``, ``translations``, ``tau`` (between
-        the largest gap within an object and the smallest gap between objects), ``sigma``
-        and ``gap`` (the smallest gap between objects aimed at).
+        Draws :class:`Scene` bunches with ``X`` (n, 6), ``a``, ``b``, ``labels``
+        (``-1``: outlier), ``rotations``, ``translations``, ``tau`` (between the largest
+        gap within an object and the smallest gap between objects), ``sigma``, ``gap``
+        (the smallest gap between objects aimed at) and ``shapes``.
     """
     lo, hi = _range(gap_factor)
     if lo <= 1:
@@ -204,7 +233,7 @@ def ground_truth_scenes(
     a = np.vstack([a, out_a])
     b = np.vstack([b, out_b])
     labels = np.concatenate([labels, np.full(len(out_a), -1)])
-    return Bunch(
+    return Scene(
         X=np.hstack([a, b]),
         a=a,
         b=b,
@@ -214,6 +243,7 @@ def ground_truth_scenes(
         tau=tau,
         sigma=sigma,
         gap=gap,
+        shapes=shapes,
     )
 
 
@@ -297,7 +327,7 @@ def good_clusterings(
     Returns
     -------
     strategy
-        Draws :class:`~sklearn.utils.Bunch` objects with ``labels`` (n,), the ``alpha``
+        Draws :class:`Clustering` bunches with ``labels`` (n,), the ``alpha``
         and ``m0`` the clustering is good for, ``n_pieces`` (clusters per object) and
         ``outliers`` (the labelling used).
     """
@@ -330,7 +360,7 @@ def good_clusterings(
     assigned = out >= 0
     permutation = rng.permutation(int(out.max()) + 1 if assigned.any() else 0)
     out[assigned] = permutation[out[assigned]]
-    return Bunch(labels=out, alpha=alpha, m0=m0, n_pieces=np.array(n_pieces), outliers=mode)
+    return Clustering(labels=out, alpha=alpha, m0=m0, n_pieces=np.array(n_pieces), outliers=mode)
 
 
 @st.composite
