@@ -1,26 +1,27 @@
-"""The distance gate of eq. (7) and the gated arg-max of the classification M-step.
+"""The distance gate of eq. (7): is cluster ``j`` within ``tau`` of a query point?
 
 The gate admits cluster ``j`` for a query point ``a`` when
 ``d_cluster(H_j, a) = min_{a' in H_j} ||a' - a|| < tau``. Testing every (point, cluster)
-pair exactly would need ``n * K`` nearest-neighbour queries per EM iteration. Two facts
-make almost all of them unnecessary:
+pair exactly would need ``n * K`` nearest-neighbour queries per EM iteration. The
+classification step (:func:`mmreg._likelihood.classify`) asks only about the few pairs
+where a cluster scores better than the point's own one, and three tests, cheapest first,
+settle almost all of those:
 
-* a point's own cluster always passes (its distance is 0), so a point needs a gate test
-  only for the clusters that score *better* than its own cluster;
-* a bounding ball per cluster (centroid ``c_j``, radius ``rho_j``) rejects the pair at
-  once when ``||a - c_j|| >= rho_j + tau``.
-
-So the arg-max is found by rounds: each pending point proposes its best-scoring cluster
-not yet rejected; the proposals are tested with one KD-tree query per proposed cluster
-(trees are built lazily, once per cluster and gate); rejected clusters are masked out and
-the point proposes again. Each round is vectorised over points, and in practice one or
-two rounds settle all points.
+* a bounding ball per cluster (centroid ``c_j``, radius ``rho_j``) closes the gate when
+  ``||a - c_j|| >= rho_j + tau``;
+* a few representative members per cluster (the one nearest the centroid, the first and
+  the last) open it when one of them is closer than ``tau``;
+* the exact nearest-member distance decides the rest: by brute force for a handful of
+  queries, else with a KD-tree of the cluster built once per gate.
 """
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 __all__ = ["ClusterGate", "gated_argmax"]
+
+# Brute force beats building a KD-tree below this many (query, member) distance pairs.
+_BRUTE_FORCE_PAIRS = 2**17
 
 
 class ClusterGate:
@@ -42,56 +43,146 @@ class ClusterGate:
         self.n_clusters = n_clusters
         if radius is None:
             return
+        points = np.asarray(points, dtype=float)
+        labels = np.asarray(labels)
         keep = labels >= 0
-        order = np.argsort(labels[keep], kind="stable")
-        self._points = points[keep][order]
-        counts = np.bincount(labels[keep], minlength=n_clusters)
-        self._bounds = np.concatenate([[0], np.cumsum(counts)])
+        if not keep.all():
+            points, labels = points[keep], labels[keep]
+        self._points = points
+        self._labels = labels
+        self._members = None
         self._trees = {}
-        safe = np.maximum(counts, 1)[:, None]
-        self._centers = np.add.reduceat(self._points, self._bounds[:-1], axis=0) / safe
-        if len(self._points) == 0:
-            self._centers = np.zeros((n_clusters, points.shape[1]))
-        spread = np.linalg.norm(self._points - np.repeat(self._centers, counts, axis=0), axis=1)
-        self._ball_radius = np.zeros(n_clusters)
-        nonempty = counts > 0
-        if nonempty.any():
-            self._ball_radius[nonempty] = np.maximum.reduceat(spread, self._bounds[:-1][nonempty])
-        self._ball_radius[~nonempty] = -np.inf
+        n, d = points.shape
+        counts = np.bincount(labels, minlength=n_clusters)[:n_clusters]
+        safe = np.maximum(counts, 1)
+        self._centers = np.empty((n_clusters, d))
+        for axis in range(d):
+            self._centers[:, axis] = np.bincount(
+                labels, weights=points[:, axis], minlength=n_clusters
+            )[:n_clusters]
+        self._centers /= safe[:, None]
+        spread = np.sqrt(np.sum((points - self._centers[labels]) ** 2, axis=1))
+        self._ball_radius = np.full(n_clusters, -np.inf)
+        np.maximum.at(self._ball_radius, labels, spread)
+        self._spread = spread
+        self._representatives = None
+
+    def reach_box(self, low, high):
+        """Clusters whose bounding ball comes within ``radius`` of the box ``[low, high]``.
+
+        Returns the sorted cluster indices; a superset of every cluster the gate admits
+        for a query point inside the box.
+        """
+        if self.radius is None:
+            return np.arange(self.n_clusters)
+        gap = np.maximum(np.maximum(low - self._centers, self._centers - high), 0.0)
+        sq = np.einsum("kj,kj->k", gap, gap)
+        reach = self._ball_radius + self.radius
+        # A relative slack keeps rounding from closing an open gate; the exact test
+        # decides every pair that survives.
+        slack = 1e-9 * (1.0 + reach**2)
+        return np.flatnonzero((reach >= 0) & (sq < reach**2 + slack))
 
     def maybe_within(self, query):
         """Boolean ``(m, K)``: False where the bounding ball proves the gate closed."""
         if self.radius is None:
             return np.ones((len(query), self.n_clusters), dtype=bool)
-        sq = (
-            np.einsum("ij,ij->i", query, query)[:, None]
-            - 2.0 * query @ self._centers.T
-            + np.einsum("ij,ij->i", self._centers, self._centers)[None, :]
-        )
-        reach = self._ball_radius + self.radius
-        # A small slack keeps rounding in the expansion from closing a gate that is open;
-        # the exact test below decides every pair that survives.
+        return self._ball_open(query[:, None, :], np.arange(self.n_clusters)[None, :])
+
+    def _ball_open(self, query, clusters):
+        """False where the bounding ball proves the gate of ``clusters`` closed."""
+        diff = query - self._centers[clusters]
+        sq = np.sum(diff * diff, axis=-1)
+        reach = self._ball_radius[clusters] + self.radius
         slack = 1e-9 * (1.0 + reach**2)
-        return sq < np.where(np.isfinite(reach), reach**2, -1.0) + slack
+        return (reach >= 0) & (sq < reach**2 + slack)
+
+    def admits(self, query, clusters):
+        """Exact gate of each query point against its own cluster; boolean (m,).
+
+        Parameters
+        ----------
+        query : ndarray of shape (m, d)
+        clusters : ndarray of shape (m,)
+            The cluster to test for each query point.
+        """
+        if self.radius is None:
+            return np.ones(len(query), dtype=bool)
+        result = np.zeros(len(query), dtype=bool)
+        open_ = np.flatnonzero(self._ball_open(query, clusters))
+        if len(open_) == 0:
+            return result
+        if self._representatives is None:
+            self._representatives = self._find_representatives()
+        reps = self._representatives[clusters[open_]]
+        diff = query[open_, None, :] - self._points[reps]
+        # Same arithmetic as a KD-tree distance: square root of the sum of squares.
+        dist = np.sqrt(np.sum(diff * diff, axis=-1)).min(axis=1)
+        near = dist < self.radius
+        result[open_[near]] = True
+        undecided = open_[~near]
+        if len(undecided):
+            order = np.argsort(clusters[undecided], kind="stable")
+            undecided = undecided[order]
+            targets, starts = np.unique(clusters[undecided], return_index=True)
+            for cluster, part in zip(targets, np.split(undecided, starts[1:]), strict=True):
+                result[part] = self.within(query[part], cluster)
+        return result
+
+    def _find_representatives(self):
+        """A few members per cluster: the one nearest the centroid, the first and the last.
+
+        Returns point indices of shape ``(n_clusters, 3)``; an empty cluster's row points
+        at a member of no particular cluster, whose test its closed ball overrides.
+        """
+        n = len(self._labels)
+        representatives = np.zeros((self.n_clusters, 3), dtype=np.intp)
+        nearest = np.full(self.n_clusters, np.inf)
+        np.minimum.at(nearest, self._labels, self._spread)
+        hit = np.flatnonzero(self._spread == nearest[self._labels])
+        representatives[self._labels[hit], 0] = hit
+        # Fancy assignment keeps the last write: the last and the first member.
+        representatives[self._labels, 1] = np.arange(n)
+        representatives[self._labels[::-1], 2] = np.arange(n)[::-1]
+        return representatives
 
     def within(self, query, cluster):
         """Exact gate of ``query`` points (m, d) against one cluster; boolean (m,)."""
         if self.radius is None:
             return np.ones(len(query), dtype=bool)
+        members = self._cluster_points(cluster)
+        if len(members) == 0:
+            return np.zeros(len(query), dtype=bool)
         tree = self._trees.get(cluster)
+        if tree is None and len(query) * len(members) <= _BRUTE_FORCE_PAIRS:
+            dist = np.empty(len(query))
+            step = max(1, _BRUTE_FORCE_PAIRS // (8 * len(members)))
+            for start in range(0, len(query), step):
+                diff = query[start : start + step, None, :] - members[None, :, :]
+                dist[start : start + step] = np.sqrt(np.sum(diff * diff, axis=-1)).min(axis=1)
+            return dist < self.radius
         if tree is None:
-            lo, hi = self._bounds[cluster], self._bounds[cluster + 1]
-            tree = self._trees[cluster] = cKDTree(self._points[lo:hi])
+            tree = self._trees[cluster] = cKDTree(members)
         dist, _ = tree.query(query, k=1, distance_upper_bound=self.radius)
         return dist < self.radius
 
+    def _cluster_points(self, cluster):
+        if self._members is None:
+            # Group the points by cluster once, on the first exact test that needs it.
+            small = self._labels.astype(np.uint16) if self.n_clusters <= 2**16 else self._labels
+            order = np.argsort(small, kind="stable")
+            counts = np.bincount(self._labels, minlength=self.n_clusters)
+            self._members = (self._points[order], np.concatenate([[0], np.cumsum(counts)]))
+        points, bounds = self._members
+        return points[bounds[cluster] : bounds[cluster + 1]]
 
-def gated_argmax(scores, query, gate, own=None):
+
+def gated_argmax(scores, query, gate, own=None, *, columns=None, tolerance=None, refine=None):
     """Row-wise arg-max of ``scores`` over the clusters the gate admits.
 
     Parameters
     ----------
-    scores : ndarray of shape (m, K)
+    scores : ndarray of shape (m, k)
         Log weighted likelihoods; ``-inf`` marks clusters that may not be chosen.
         Modified in place.
     query : ndarray of shape (m, d)
@@ -100,41 +191,93 @@ def gated_argmax(scores, query, gate, own=None):
     own : ndarray of shape (m,), default=None
         Current cluster of each row (``-1`` for none). A point's own cluster is always
         admitted by the gate, and wins ties, so points do not move between equally
-        likely clusters.
+        likely clusters; other ties go to the lowest cluster index.
+    columns : ndarray of shape (k,), default=None
+        The cluster of each column, increasing, and containing every ``own`` cluster;
+        None means ``0..k-1``.
+    tolerance : ndarray of shape (k,), default=None
+        Bound on the rounding error of each column of ``scores``. A row in which another
+        column comes within the tolerance of the best one is recomputed with ``refine``
+        before it is decided, so that near-ties are decided on accurate scores.
+    refine : callable, default=None
+        ``refine(rows)`` returns accurate scores of shape ``(len(rows), k)``.
 
     Returns
     -------
     labels : ndarray of shape (m,)
         Chosen cluster, ``-1`` where every cluster is gated out.
     """
-    m = len(scores)
+    m, k = scores.shape
     labels = np.full(m, -1, dtype=np.intp)
-    if scores.shape[1] == 0 or m == 0:
+    if k == 0 or m == 0:
         return labels
-    rows = np.arange(m)
-    own_score = np.full(m, -np.inf)
-    if own is not None:
-        has_own = own >= 0
-        own_score[has_own] = scores[rows[has_own], own[has_own]]
-    if gate.radius is not None:
-        scores[~gate.maybe_within(query)] = -np.inf
-    pending = rows
+    if columns is None:
+        columns = np.arange(k)
+    own_column = np.full(m, -1, dtype=np.intp)
+    if own is None:
+        own = own_column
+    else:
+        has_own = np.flatnonzero(own >= 0)
+        own_column[has_own] = np.searchsorted(columns, own[has_own])
+    refined = np.zeros(m, dtype=bool)
+    pending = np.arange(m)
+    rounds = 0
     while len(pending):
-        candidate = np.argmax(scores[pending], axis=1)
+        candidate = np.argmax(scores if rounds == 0 else scores[pending], axis=1)
+        if refine is not None:
+            _refine_near_ties(scores, pending, candidate, tolerance, refine, refined)
         best = scores[pending, candidate]
-        settle = (best <= own_score[pending]) | ~np.isfinite(best)
-        if own is not None:
-            settled = pending[settle]
-            labels[settled] = np.where(np.isfinite(own_score[settled]), own[settled], -1)
+        own_score = np.full(len(pending), -np.inf)
+        has_own = own_column[pending] >= 0
+        own_score[has_own] = scores[pending[has_own], own_column[pending[has_own]]]
+        settle = (best <= own_score) | ~np.isfinite(best)
+        settled = pending[settle]
+        labels[settled] = np.where(np.isfinite(own_score[settle]), own[settled], -1)
         pending, candidate = pending[~settle], candidate[~settle]
         if gate.radius is None:
-            labels[pending] = candidate
+            labels[pending] = columns[candidate]
             break
-        admitted = np.zeros(len(pending), dtype=bool)
-        for cluster in np.unique(candidate):
-            sel = np.flatnonzero(candidate == cluster)
-            admitted[sel] = gate.within(query[pending[sel]], cluster)
-        labels[pending[admitted]] = candidate[admitted]
+        admitted = gate.admits(query[pending], columns[candidate])
+        labels[pending[admitted]] = columns[candidate[admitted]]
         scores[pending[~admitted], candidate[~admitted]] = -np.inf
         pending = pending[~admitted]
+        rounds += 1
+        if rounds == 2 and len(pending):
+            # Rows still undecided tend to face many closed gates (say, far objects with
+            # the same motion): rule out at once every cluster whose ball is out of reach.
+            closed = ~gate._ball_open(query[pending, None, :], columns[None, :])
+            sub = scores[pending]
+            sub[closed] = -np.inf
+            scores[pending] = sub
     return labels
+
+
+def _refine_near_ties(scores, pending, candidate, tolerance, refine, refined):
+    """Recompute the rows whose best column is not clearly ahead of every other one.
+
+    ``candidate`` (the arg-max of each pending row) is updated in place.
+    """
+    todo = np.flatnonzero(~refined[pending])
+    if len(todo) == 0:
+        return
+    whole = len(todo) == len(scores)
+    rows = pending[todo]
+    table = scores if whole else scores[rows]
+    best = table[np.arange(len(rows)), candidate[todo]]
+    # A cheap test with the largest tolerance first, the exact one on the few survivors.
+    near = table >= (best - 2 * tolerance.max())[:, None]
+    maybe = np.flatnonzero(np.count_nonzero(near, axis=1) > 1)
+    if len(maybe) == 0:
+        return
+    floor = best[maybe] - tolerance[candidate[todo[maybe]]]
+    near = table[maybe] + tolerance >= floor[:, None]
+    ambiguous = todo[maybe[np.count_nonzero(near, axis=1) > 1]]
+    if len(ambiguous) == 0:
+        return
+    rows = pending[ambiguous]
+    accurate = refine(rows)
+    # Keep the clusters already ruled out by the gate ruled out.
+    accurate[np.isneginf(scores[rows])] = -np.inf
+    scores[rows] = accurate
+    refined[rows] = True
+    candidate[ambiguous] = np.argmax(accurate, axis=1)

@@ -13,6 +13,7 @@ __all__ = [
     "degenerate_groups",
     "fit_rigid",
     "fit_rigid_grouped",
+    "fit_rigid_rows",
     "group_sums",
     "residuals",
     "rotation_angle",
@@ -39,13 +40,22 @@ def group_sums(values, labels, n_groups):
     values = np.asarray(values, dtype=float)
     labels = np.asarray(labels)
     keep = labels >= 0
-    n_rows = int(keep.sum())
-    # A (n_groups x n) one-hot sparse matrix turns all group sums into one product,
-    # which is several times faster than np.add.at on (n, k) rows.
-    onehot = sparse.csr_matrix(
-        (np.ones(n_rows), (labels[keep], np.arange(n_rows))), shape=(n_groups, n_rows)
+    if not keep.all():
+        values, labels = values[keep], labels[keep]
+    return np.asarray(one_hot(labels, n_groups) @ values)
+
+
+def one_hot(labels, n_groups):
+    """Sparse ``(n_groups, n)`` indicator matrix of ``labels`` (all in ``0..n_groups-1``).
+
+    ``one_hot(labels, K) @ values`` sums the rows of ``values`` per group in one pass,
+    adding each group's rows in their order. In CSC form the matrix needs no sorting to
+    build, since every column holds exactly one entry.
+    """
+    n = len(labels)
+    return sparse.csc_matrix(
+        (np.ones(n), np.asarray(labels, dtype=np.intp), np.arange(n + 1)), shape=(n_groups, n)
     )
-    return np.asarray(onehot @ values[keep])
 
 
 def fit_rigid_grouped(a, b, labels, n_groups):
@@ -82,22 +92,58 @@ def fit_rigid_grouped(a, b, labels, n_groups):
     >>> np.round(t, 6)
     array([[1., 2., 3.]])
     """
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
     labels = np.asarray(labels)
-    d = a.shape[1]
-    counts = np.bincount(labels[labels >= 0], minlength=n_groups)[:n_groups]
-    safe = np.maximum(counts, 1)[:, None]
-    centroid_a = group_sums(a, labels, n_groups) / safe
-    centroid_b = group_sums(b, labels, n_groups) / safe
     keep = labels >= 0
-    lab = labels[keep]
+    a_rows = np.asarray(a, dtype=float)[keep].T
+    b_rows = np.asarray(b, dtype=float)[keep].T
+    rotations, translations, counts, _, _ = fit_rigid_rows(a_rows, b_rows, labels[keep], n_groups)
+    return rotations, translations, counts
+
+
+def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
+    """:func:`fit_rigid_grouped` on coordinate rows, also returning the residuals.
+
+    The workhorse of the EM's M-step: coordinates are rows of ``(d, n)`` arrays, so that
+    each per-group sum is one weighted ``np.bincount`` over a contiguous row.
+
+    Parameters
+    ----------
+    a_rows, b_rows : ndarray of shape (d, n)
+        Corresponding points, one coordinate per row.
+    labels : ndarray of shape (n,)
+        Group of each correspondence in ``0..n_groups-1`` (no negative labels).
+    n_groups : int
+
+    Returns
+    -------
+    rotations, translations, counts
+        As :func:`fit_rigid_grouped`.
+    residuals : ndarray of shape (d, n)
+        ``b - R a - t`` of every correspondence under its group's motion, computed from
+        the centred points (no cancellation far from the origin).
+    indicator : sparse matrix of shape (n_groups, n)
+        :func:`one_hot` of ``labels``, for further per-group sums.
+    """
+    d = len(a_rows)
+    labels = np.asarray(labels, dtype=np.intp)
+    counts = np.bincount(labels, minlength=n_groups)[:n_groups]
+    safe = np.maximum(counts, 1)
+    indicator = one_hot(labels, n_groups)
+
+    def sums(rows):
+        return np.asarray(indicator @ rows.T).T
+
+    centroid_a = sums(a_rows) / safe  # (d, n_groups)
+    centroid_b = sums(b_rows) / safe
     # Centre before forming outer products: sum(a b^T) - m ca cb^T cancels badly far
     # from the origin.
-    ca = a[keep] - centroid_a[lab]
-    cb = b[keep] - centroid_b[lab]
-    outer = (ca[:, :, None] * cb[:, None, :]).reshape(len(lab), d * d)
-    cross = group_sums(outer, lab, n_groups).reshape(n_groups, d, d)
+    ca = a_rows - np.take(centroid_a, labels, axis=1)
+    cb = b_rows - np.take(centroid_b, labels, axis=1)
+    outer = np.empty((d * d, len(labels)))
+    for p in range(d):
+        for q in range(d):
+            np.multiply(ca[p], cb[q], out=outer[p * d + q])
+    cross = sums(outer).T.reshape(n_groups, d, d)
     u, _, vt = np.linalg.svd(cross)
     v = np.swapaxes(vt, -1, -2)
     ut = np.swapaxes(u, -1, -2)
@@ -107,8 +153,14 @@ def fit_rigid_grouped(a, b, labels, n_groups):
     correction[:, -1] = sign
     rotations = (v * correction[:, None, :]) @ ut
     rotations[counts == 0] = np.eye(d)
-    translations = centroid_b - np.einsum("kij,kj->ki", rotations, centroid_a)
-    return rotations, translations, counts
+    translations = centroid_b.T - np.einsum("kij,jk->ki", rotations, centroid_a)
+    # t = centroid_b - R centroid_a, so b - R a - t = (b - centroid_b) - R (a - centroid_a).
+    residuals = cb.copy()
+    per_point = np.take(rotations.reshape(n_groups, d * d).T, labels, axis=1)
+    for p in range(d):
+        for q in range(d):
+            residuals[p] -= per_point[p * d + q] * ca[q]
+    return rotations, translations, counts, residuals, indicator
 
 
 def fit_rigid(a, b):

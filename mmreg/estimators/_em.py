@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from mmreg._gate import ClusterGate
-from mmreg._geometry import fit_rigid_grouped
-from mmreg._likelihood import classify, cluster_sigmas
+from mmreg._geometry import fit_rigid_rows
+from mmreg._likelihood import CorrespondenceBlocks, classify
 from mmreg._validation import compact_labels
 
 __all__ = ["EMResult", "default_sigma_floor", "multi_model_em"]
@@ -53,10 +53,29 @@ def _relabel_by_size(labels, n_clusters):
 
 def fit_cluster_models(a, b, labels, n_clusters, sigma_floor):
     """Pose, weight and noise scale of every cluster (Algorithm 1, lines 3-6)."""
-    rotations, translations, counts = fit_rigid_grouped(a, b, labels, n_clusters)
-    weights = counts / len(a)
-    sigmas = cluster_sigmas(a, b, rotations, translations, labels, n_clusters, sigma_floor)
-    return rotations, translations, sigmas, weights, counts
+    keep = labels >= 0
+    rows = np.asarray(a, dtype=float)[keep].T, np.asarray(b, dtype=float)[keep].T
+    return _fit_cluster_rows(*rows, labels[keep], n_clusters, sigma_floor, len(a))
+
+
+def _fit_cluster_rows(a_rows, b_rows, labels, n_clusters, sigma_floor, n_total):
+    """:func:`fit_cluster_models` on the ``(d, m)`` coordinate rows of clustered points."""
+    rotations, translations, counts, res, indicator = fit_rigid_rows(
+        a_rows, b_rows, labels, n_clusters
+    )
+    weights = counts / n_total
+    # sigma_j = sqrt(tr(cov(E_j)) / d), sample covariance (ddof=1) of the residuals.
+    d = len(a_rows)
+    moments = np.empty((d + 1, len(labels)))
+    moments[:d] = res
+    np.einsum("ij,ij->j", res, res, out=moments[d])
+    sums = np.asarray(indicator @ moments.T)
+    mean_sq_norm = np.sum(sums[:, :d] ** 2, axis=1) / np.maximum(counts, 1)
+    scatter = np.maximum(sums[:, d] - mean_sq_norm, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigmas = np.sqrt(scatter / (d * (counts - 1)))
+    sigmas[counts < 2] = sigma_floor
+    return rotations, translations, np.maximum(sigmas, sigma_floor), weights, counts
 
 
 def multi_model_em(
@@ -89,6 +108,8 @@ def multi_model_em(
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
     labels, n_clusters = compact_labels(init_labels)
+    # The a-points never move: their blocks and residual features serve every E-step.
+    blocks = CorrespondenceBlocks(a, b) if max_iter > 0 and n_clusters > 0 else None
     n_iter = 0
     converged = False
     for _ in range(max_iter):
@@ -112,7 +133,15 @@ def multi_model_em(
         # measured against the clusters as they were when the poses were fitted.
         gate = ClusterGate(a, own, len(kept), tau)
         new = classify(
-            a, b, rotations[kept], translations[kept], sigmas[kept], weights[kept], gate, own
+            a,
+            b,
+            rotations[kept],
+            translations[kept],
+            sigmas[kept],
+            weights[kept],
+            gate,
+            own,
+            blocks=blocks,
         )
         new_in_old_ids = np.full(len(new), -1, dtype=np.intp)
         new_in_old_ids[new >= 0] = kept[new[new >= 0]]
