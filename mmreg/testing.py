@@ -158,9 +158,7 @@ def _range(value):
     return (value, value) if np.isscalar(value) else tuple(value)
 
 
-@st.composite
 def ground_truth_scenes(
-    draw,
     n_objects=(1, 4),
     points_per_object=(30, 120),
     noise=(0.0, 0.05),
@@ -198,21 +196,45 @@ def ground_truth_scenes(
         gap within an object and the smallest gap between objects), ``sigma``, ``gap``
         (the smallest gap between objects aimed at) and ``shapes``.
     """
-    lo, hi = _range(gap_factor)
-    if lo <= 1:
-        raise ValueError(f"gap_factor must be above 1 (objects farther than tau); got {lo}.")
-    n = draw(st.integers(*_range(n_objects)))
+    if _range(gap_factor)[0] <= 1:
+        raise ValueError(
+            f"gap_factor must be above 1 (objects farther than tau); got {gap_factor}."
+        )
+    return _scenes(
+        _range(n_objects),
+        _range(points_per_object),
+        _range(noise),
+        _range(outlier_fraction),
+        _range(object_size),
+        _range(gap_factor),
+        same_motion,
+    )
+
+
+@st.composite
+def _scenes(
+    draw,
+    n_objects,
+    points_per_object,
+    noise,
+    outlier_fraction,
+    object_size,
+    gap_factor,
+    same_motion,
+):
+    lo, hi = gap_factor
+    n = draw(st.integers(*n_objects))
     rng = np.random.RandomState(draw(st.integers(0, 2**32 - 1)))
     shapes = [draw(st.sampled_from(SHAPES)) for _ in range(n)]
-    sizes = [draw(st.floats(*_range(object_size))) for _ in range(n)]
-    counts = [draw(st.integers(*_range(points_per_object))) for _ in range(n)]
+    sizes = [draw(st.floats(*object_size)) for _ in range(n)]
+    counts = [draw(st.integers(*points_per_object)) for _ in range(n)]
     motions = [draw(rotations()) for _ in range(n)]
     shifts = [np.array(draw(st.tuples(*[st.floats(-3.0, 3.0)] * 3))) for _ in range(n)]
     if same_motion:
         for j in range(1, n):
             if draw(st.booleans()):
                 motions[j], shifts[j] = motions[0], shifts[0]
-    sigma = draw(st.floats(*_range(noise)))
+    sigma = draw(st.floats(*noise))
     objects = [
         size * _unit_shape(shape, count, rng) @ Rotation.random(random_state=rng).as_matrix().T
         for shape, size, count in zip(shapes, sizes, counts, strict=True)
@@ -227,7 +249,7 @@ def ground_truth_scenes(
     b = np.einsum("nij,nj->ni", rot[labels], a) + trans[labels]
     b += rng.uniform(-sigma, sigma, size=b.shape)
 
-    n_outliers = int(round(draw(st.floats(*_range(outlier_fraction))) * len(a)))
+    n_outliers = int(round(draw(st.floats(*outlier_fraction)) * len(a)))
     out_a = _outliers(a, n_outliers, tau, margin=gap, rng=rng)
     out_b = rng.uniform(b.min(axis=0) - 1, b.max(axis=0) + 1, size=(len(out_a), 3))
     a = np.vstack([a, out_a])
@@ -299,9 +321,8 @@ def _split_object(points, tau, n_seeds, alpha, m0, rng):
     return np.unique(cells, return_inverse=True)[1]
 
 
-@st.composite
 def good_clusterings(
-    draw, scene, alpha=(1.5, 4.0), m0=(4, 30), max_pieces=5, outliers=OUTLIER_LABELLINGS
+    scene, alpha=(1.5, 4.0), m0=(4, 30), max_pieces=5, outliers=OUTLIER_LABELLINGS
 ):
     """Initial clusterings of ``scene`` that are ``(tau, alpha, m0)``-good (Definition 2).
 
@@ -336,8 +357,19 @@ def good_clusterings(
     m0_lo, m0_hi = _range(m0)
     if smallest < m0_lo:
         raise ValueError(f"the scene's smallest object has {smallest} < m0 = {m0_lo} points.")
-    m0 = draw(st.integers(m0_lo, min(m0_hi, smallest)))
-    alpha = draw(st.floats(*_range(alpha)))
+    if _range(alpha)[0] < 1:
+        raise ValueError(f"alpha must be >= 1; got {alpha}.")
+    unknown = set(outliers) - set(OUTLIER_LABELLINGS)
+    if unknown or not len(outliers):
+        raise ValueError(f"outliers must be a non-empty subset of {OUTLIER_LABELLINGS}.")
+    return _clusterings(scene, _range(alpha), (m0_lo, min(m0_hi, smallest)), max_pieces, outliers)
+
+
+@st.composite
+def _clusterings(draw, scene, alpha, m0, max_pieces, outliers):
+    labels = scene.labels
+    m0 = draw(st.integers(*m0))
+    alpha = draw(st.floats(*alpha))
     rng = np.random.RandomState(draw(st.integers(0, 2**32 - 1)))
     out = np.full(len(labels), -1, dtype=np.intp)
     n_clusters = 0
@@ -363,13 +395,21 @@ def good_clusterings(
     return Clustering(labels=out, alpha=alpha, m0=m0, n_pieces=np.array(n_pieces), outliers=mode)
 
 
-@st.composite
-def scenes_with_good_clusterings(draw, alpha=(1.5, 4.0), m0=(4, 30), max_pieces=5, **scene):
+def scenes_with_good_clusterings(alpha=(1.5, 4.0), m0=(4, 30), max_pieces=5, **scene):
     """Pairs ``(scene, clustering)``: a Definition-1 scene and a good clustering of it.
 
-    ``scene`` keywords go to :func:`ground_truth_scenes`; its ``points_per_object`` must
-    allow ``m0``.
+    ``scene`` keywords go to :func:`ground_truth_scenes`; the smallest number of
+    ``points_per_object`` must be at least the smallest ``m0``.
     """
-    scene_ = draw(ground_truth_scenes(**scene))
-    clustering = draw(good_clusterings(scene_, alpha=alpha, m0=m0, max_pieces=max_pieces))
-    return scene_, clustering
+    smallest = _range(scene.get("points_per_object", (30, 120)))[0]
+    if smallest < _range(m0)[0]:
+        raise ValueError(
+            f"points_per_object starts at {smallest} < m0 = {_range(m0)[0]}: objects "
+            "could be too small for any cluster of m0 points."
+        )
+    scenes = ground_truth_scenes(**scene)
+    return scenes.flatmap(
+        lambda drawn: st.tuples(
+            st.just(drawn), good_clusterings(drawn, alpha=alpha, m0=m0, max_pieces=max_pieces)
+        )
+    )

@@ -9,7 +9,12 @@ from scipy.spatial.distance import cdist
 
 from mmreg._neighbors import connected_labels
 from mmreg.datasets import make_scene
-from mmreg.testing import ground_truth_scenes, rotations, scenes_with_good_clusterings
+from mmreg.testing import (
+    good_clusterings,
+    ground_truth_scenes,
+    rotations,
+    scenes_with_good_clusterings,
+)
 from mmreg.theory import (
     is_good_clustering,
     is_tau_connected,
@@ -353,3 +358,18 @@ def test_checks_are_fast_on_100k_points():
     init = np.where(scene.labels >= 0, 2 * scene.labels + (scene.a[:, 2] > 0.3), -1)
     good = is_good_clustering(init, scene.labels, scene.X, 1.5, 1.0, 10)
     assert good["partition"] and good["connected"] and good["pure"] and good["size"]
+
+
+def test_strategies_reject_impossible_requests():
+    with pytest.raises(ValueError, match="gap_factor"):
+        ground_truth_scenes(gap_factor=(1.0, 2.0))
+    with pytest.raises(ValueError, match="m0"):
+        scenes_with_good_clusterings(points_per_object=(10, 10), m0=(20, 30))
+    scene = make_scene(n_objects=2, n_points=40, random_state=0)
+    scene.tau = 0.5
+    with pytest.raises(ValueError, match="smallest object has 20"):
+        good_clusterings(scene, m0=(30, 40))
+    with pytest.raises(ValueError, match="alpha"):
+        good_clusterings(scene, alpha=(0.5, 2.0))
+    with pytest.raises(ValueError, match="outliers"):
+        good_clusterings(scene, outliers=("dropped",))
