@@ -10,6 +10,7 @@ blocked matrix products.
 import numpy as np
 
 from mmreg._geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
+from mmreg._likelihood import single_threaded_blas
 
 __all__ = [
     "count_inliers",
@@ -19,8 +20,9 @@ __all__ = [
     "nearest_model",
 ]
 
-# Cells per block of a (rows x hypotheses) residual table: about 32 MiB of float64.
-BLOCK_CELLS = 2**22
+# Cells per block of a (rows x hypotheses) residual table: 2 MiB of float64, so that
+# the block is still in cache when it is compared and counted.
+BLOCK_CELLS = 2**18
 
 
 def minimal_sample_size(d):
@@ -78,7 +80,9 @@ def count_inliers(a, b, rotations, translations, threshold):
     """Number of correspondences within ``threshold`` of each motion.
 
     The ``(n, K)`` table of squared residuals is built in row blocks of bounded memory,
-    one matrix product per block (:func:`~mmreg._geometry.squared_residuals_all`).
+    one matrix product per block (:func:`~mmreg._geometry.squared_residuals_all`), on
+    one BLAS thread: these thin products gain nothing from a second thread and lose a
+    lot to it when the cores are busy.
 
     Returns
     -------
@@ -88,9 +92,10 @@ def count_inliers(a, b, rotations, translations, threshold):
     k = len(rotations)
     counts = np.zeros(k, dtype=np.intp)
     limit = threshold**2
-    for block in _row_blocks(len(a), k):
-        sq = squared_residuals_all(a[block], b[block], rotations, translations)
-        counts += np.count_nonzero(sq <= limit, axis=0)
+    with single_threaded_blas():
+        for block in _row_blocks(len(a), k):
+            sq = squared_residuals_all(a[block], b[block], rotations, translations)
+            counts += np.count_nonzero(sq <= limit, axis=0)
     return counts
 
 
@@ -109,9 +114,10 @@ def nearest_model(a, b, rotations, translations, threshold):
     if k == 0:
         return labels
     limit = threshold**2
-    for block in _row_blocks(n, k):
-        sq = squared_residuals_all(a[block], b[block], rotations, translations)
-        best = np.argmin(sq, axis=1)
-        within = sq[np.arange(len(best)), best] <= limit
-        labels[block] = np.where(within, best, -1)
+    with single_threaded_blas():
+        for block in _row_blocks(n, k):
+            sq = squared_residuals_all(a[block], b[block], rotations, translations)
+            best = np.argmin(sq, axis=1)
+            within = sq[np.arange(len(best)), best] <= limit
+            labels[block] = np.where(within, best, -1)
     return labels

@@ -15,9 +15,9 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg._geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
+from mmreg._likelihood import single_threaded_blas
 from mmreg._validation import compact_labels
 from mmreg.baselines._hypotheses import (
-    BLOCK_CELLS,
     fit_minimal_samples,
     minimal_sample_size,
     nearest_model,
@@ -30,6 +30,9 @@ __all__ = ["TLinkage", "preference", "t_linkage", "tanimoto_linkage"]
 
 # psi vanishes beyond this many tau_t (eq. 8 of Jin et al.).
 CUTOFF = 5.0
+# Cells per block of the (n x hypotheses) residual table, about 32 MiB: each block holds
+# every row, so wide blocks spread the cost of each call's per-row features.
+BLOCK_CELLS = 2**22
 
 
 def preference(distance, tau_t):
@@ -232,8 +235,11 @@ def t_linkage(
         rotations = np.concatenate([rotations, extra_r])
         translations = np.concatenate([translations, extra_t])
 
-    pref = unit_preferences(a, b, units, n_units, rotations, translations, tau_t)
-    owner = tanimoto_linkage(pref)
+    # Thin products and matrix-vector products: one BLAS thread is faster, above all
+    # when the cores are busy.
+    with single_threaded_blas():
+        pref = unit_preferences(a, b, units, n_units, rotations, translations, tau_t)
+        owner = tanimoto_linkage(pref)
     # A unit that prefers no hypothesis is explained by no model: an outlier.
     owner[~np.any(pref > 0, axis=1)] = -1
     labels = owner[units]
