@@ -233,7 +233,7 @@ def _radius_for_count(points, n_clusters, min_cluster_size, n_neighbors, workers
 
 
 def euclidean_clustering(
-    points, *, n_clusters=100, radius=None, min_cluster_size=10, n_neighbors=6, n_jobs=None
+    points, *, n_clusters=100, radius=None, min_cluster_size=4, n_neighbors=6, n_jobs=None
 ):
     """Euclidean cluster extraction on points, with a given or an automatic radius.
 
@@ -247,7 +247,7 @@ def euclidean_clustering(
         when ``radius`` is None.
     radius : float or None, default=None
         Largest gap within a cluster. None chooses it from ``n_clusters``.
-    min_cluster_size : int, default=10
+    min_cluster_size : int, default=4
         Components with fewer points are left out (label ``-1``).
     n_neighbors : int, default=6
         Neighbours per point in the k-NN graph that seeds the radius search.
@@ -317,9 +317,10 @@ class EuclideanClustering(PartitionInitializer):
     radius : float or None, default=None
         Largest gap within a cluster, in the units of the points. None chooses it from
         ``n_clusters``.
-    min_cluster_size : int, default=10
+    min_cluster_size : int, default=4
         Components with fewer points get label ``-1``: no initial cluster. The EM does not
-        fit poses to them but offers them to every cluster within ``tau`` at once.
+        fit poses to them but offers them to every cluster within ``tau`` at once. The
+        default is the EM's own ``min_cluster_size``, below which it drops a cluster.
     n_neighbors : int, default=6
         Neighbours per point in the k-nearest-neighbour graph from which the single
         linkage is built. The clusters are exact whatever its value; it trades the cost
@@ -384,7 +385,7 @@ class EuclideanClustering(PartitionInitializer):
     }
 
     def __init__(
-        self, n_clusters=100, *, radius=None, min_cluster_size=10, n_neighbors=6, n_jobs=None
+        self, n_clusters=100, *, radius=None, min_cluster_size=4, n_neighbors=6, n_jobs=None
     ):
         self.n_clusters = n_clusters
         self.radius = radius

@@ -1,0 +1,83 @@
+"""scikit-learn's own estimator checks on the initialisers, and their docstring examples."""
+
+import doctest
+import importlib
+
+import numpy as np
+import pytest
+from sklearn.utils.estimator_checks import parametrize_with_checks
+
+from mmreg.init import (
+    DBSCANClustering,
+    EuclideanClustering,
+    PrecomputedLabels,
+    PrecomputedMasks,
+)
+
+# X holds stacked correspondences [a | b], so it must have an even number of columns.
+# These checks feed data with 3 or 5 columns and cannot apply; every other check must pass.
+ODD_COLUMNS = "the check uses X with an odd number of columns, which are not [a | b] pairs"
+ODD_COLUMN_CHECKS = (
+    "check_dict_unchanged",
+    "check_dont_overwrite_parameters",
+    "check_estimators_dtypes",
+    "check_estimators_nan_inf",
+    "check_estimators_pickle",
+    "check_f_contiguous_array_estimator",
+    "check_fit2d_predict1d",
+    "check_fit_score_takes_y",
+    "check_methods_sample_order_invariance",
+    "check_methods_subset_invariance",
+    "check_pipeline_consistency",
+    "check_transformer_data_not_an_array",
+    "check_transformer_general",
+)
+# Precomputed labels and pixels belong to one X: these checks fit on X of other lengths.
+FIXED_ROWS = "the labels (or pixels) are given for 30 rows; the check fits on another number"
+FIXED_ROW_CHECKS = (
+    "check_clustering",
+    "check_dtype_object",
+    "check_estimators_fit_returns_self",
+    "check_estimators_overwrite_params",
+    "check_fit2d_1sample",
+    "check_fit_check_is_fitted",
+    "check_fit_idempotent",
+    "check_n_features_in",
+    "check_n_features_in_after_fitting",
+    "check_positive_only_tag_during_fit",
+    "check_readonly_memmap_input",
+)
+
+
+def expected_failed_checks(estimator):
+    failed = dict.fromkeys(ODD_COLUMN_CHECKS, ODD_COLUMNS)
+    if isinstance(estimator, (PrecomputedLabels, PrecomputedMasks)):
+        failed.update(dict.fromkeys(FIXED_ROW_CHECKS, FIXED_ROWS))
+    return failed
+
+
+ROWS = np.arange(30)
+
+
+@parametrize_with_checks(
+    [
+        EuclideanClustering(n_clusters=3, min_cluster_size=1),
+        EuclideanClustering(radius=0.5),
+        DBSCANClustering(eps=0.5, backend="sklearn"),
+        PrecomputedLabels(ROWS % 3),
+        PrecomputedMasks(ROWS.reshape(5, 6) % 4, np.column_stack([ROWS % 6, ROWS // 6])),
+    ],
+    expected_failed_checks=expected_failed_checks,
+)
+def test_sklearn_compatible_initialiser(estimator, check):
+    check(estimator)
+
+
+@pytest.mark.parametrize(
+    "module",
+    ["_describe", "_dbscan", "_euclidean", "_masks", "_precomputed"],
+)
+def test_docstring_examples(module):
+    result = doctest.testmod(importlib.import_module(f"mmreg.init.{module}"))
+    assert result.attempted > 0
+    assert result.failed == 0
