@@ -456,9 +456,11 @@ def expected_failed_checks(estimator):
 
 @parametrize_with_checks(
     [
+        NaiveRegistration(),
         NaiveRegistration(init=KMeans(n_clusters=3, n_init=1), random_state=0),
         SequentialRANSAC(random_state=0),
-        TLinkage(init=KMeans(n_clusters=3, n_init=1), random_state=0),
+        TLinkage(),
+        TLinkage(init=KMeans(n_clusters=3, n_init=1), n_hypotheses=20, random_state=0),
     ],
     expected_failed_checks=expected_failed_checks,
 )
