@@ -3,7 +3,7 @@
 A loop over clusters, one KD-tree per cluster for the distance gate, one SVD per cluster.
 It follows the same documented conventions as :func:`mmreg.estimators.multi_model_em`
 (sample covariance with ``ddof=1`` and a floor on sigma, ties kept in the current cluster,
-then the lowest cluster index, gate ``d < tau``, final clusters numbered by decreasing
+then the lowest cluster index, gate ``d <= tau``, final clusters numbered by decreasing
 size), so the two must return the same partition. It imports nothing from mmreg.
 """
 
@@ -45,7 +45,7 @@ def straightforward_em(
             log_w[:, j] = np.log(len(members) / n) - dim * np.log(sigma) - r2 / (2 * sigma**2)
             if tau is not None:
                 dist, _ = cKDTree(a[members]).query(a)
-                log_w[dist >= tau, j] = -np.inf
+                log_w[dist > tau, j] = -np.inf
         new = np.full(n, -1)
         for i in range(n):
             if not np.isfinite(log_w[i]).any():

@@ -1,16 +1,19 @@
 """The distance gate of eq. (7): is cluster ``j`` within ``tau`` of a query point?
 
 The gate admits cluster ``j`` for a query point ``a`` when
-``d_cluster(H_j, a) = min_{a' in H_j} ||a' - a|| < tau``. Testing every (point, cluster)
+``d_cluster(H_j, a) = min_{a' in H_j} ||a' - a|| <= tau``. Eq. (7) writes ``< tau``, but
+Definitions 1 and 2 call points at most ``tau`` apart ``tau``-connected; with a strict gate,
+pieces of an object exactly ``tau`` apart would never meet, against Theorem 1 (see
+``tests/test_theory_counterexamples.py``). Testing every (point, cluster)
 pair exactly would need ``n * K`` nearest-neighbour queries per EM iteration. The
 classification step (:func:`mmreg._likelihood.classify`) asks only about the few pairs
 where a cluster scores better than the point's own one, and three tests, cheapest first,
 settle almost all of those:
 
 * a bounding ball per cluster (centroid ``c_j``, radius ``rho_j``) closes the gate when
-  ``||a - c_j|| >= rho_j + tau``;
+  ``||a - c_j|| > rho_j + tau``;
 * a few representative members per cluster (the one nearest the centroid, the first and
-  the last) open it when one of them is closer than ``tau``;
+  the last) open it when one of them is within ``tau``;
 * the exact nearest-member distance decides the rest: by brute force for a handful of
   queries, else with a KD-tree of the cluster built once per gate.
 """
@@ -25,7 +28,7 @@ _BRUTE_FORCE_PAIRS = 2**17
 
 
 class ClusterGate:
-    """Exact test of ``min_{a' in H_j} ||a' - a|| < radius`` for clusters ``H_j``.
+    """Exact test of ``min_{a' in H_j} ||a' - a|| <= radius`` for clusters ``H_j``.
 
     Parameters
     ----------
@@ -118,7 +121,7 @@ class ClusterGate:
         diff = query[open_, None, :] - self._points[reps]
         # Same arithmetic as a KD-tree distance: square root of the sum of squares.
         dist = np.sqrt(np.sum(diff * diff, axis=-1)).min(axis=1)
-        near = dist < self.radius
+        near = dist <= self.radius
         result[open_[near]] = True
         undecided = open_[~near]
         if len(undecided):
@@ -160,11 +163,13 @@ class ClusterGate:
             for start in range(0, len(query), step):
                 diff = query[start : start + step, None, :] - members[None, :, :]
                 dist[start : start + step] = np.sqrt(np.sum(diff * diff, axis=-1)).min(axis=1)
-            return dist < self.radius
+            return dist <= self.radius
         if tree is None:
             tree = self._trees[cluster] = cKDTree(members)
-        dist, _ = tree.query(query, k=1, distance_upper_bound=self.radius)
-        return dist < self.radius
+        # The tree reports only distances below the bound; one ulp more keeps "== radius".
+        bound = np.nextafter(self.radius, np.inf)
+        dist, _ = tree.query(query, k=1, distance_upper_bound=bound)
+        return dist <= self.radius
 
     def _cluster_points(self, cluster):
         if self._members is None:

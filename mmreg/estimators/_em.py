@@ -129,7 +129,7 @@ def multi_model_em(
         position[kept] = np.arange(len(kept))
         own = np.full(len(labels), -1, dtype=np.intp)
         own[labels >= 0] = position[labels[labels >= 0]]
-        # Lines 8-9 and 15-18: E-step and classification M-step, gated by d_cluster < tau
+        # Lines 8-9 and 15-18: E-step and classification M-step, gated by d_cluster <= tau
         # measured against the clusters as they were when the poses were fitted.
         gate = ClusterGate(a, own, len(kept), tau)
         new = classify(

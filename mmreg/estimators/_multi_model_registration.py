@@ -27,9 +27,10 @@ class MultiModelRegistration(BaseRegistration):
     ----------
     tau : float or None, default=1.5
         Distance gate of eq. (7), in the units of the points: a correspondence may join
-        cluster ``H_j`` only if ``min_{a' in H_j} ||a' - a_i|| < tau``. Two objects farther
-        apart than ``tau`` stay apart even when they move alike. None turns the gate off
-        (the paper's "Ours (Vanilla)").
+        cluster ``H_j`` only if ``min_{a' in H_j} ||a' - a_i|| <= tau`` (eq. 7 writes ``<``;
+        ``<=`` matches the paper's tau-connectedness, so Theorem 1 holds also for gaps of
+        exactly ``tau``). Two objects farther apart than ``tau`` stay apart even when they
+        move alike. None turns the gate off (the paper's "Ours (Vanilla)").
     min_cluster_size : int, default=4
         ``m_min``: clusters with fewer correspondences are removed before each M-step.
     max_iter : int, default=10
