@@ -272,7 +272,10 @@ class TLinkage(BaseRegistration):
         Horn fit). Correspondences with a negative initial label start as single units.
     n_hypotheses : int, default=0
         Random minimal-sample hypotheses added to those of the initial clusters; each
-        sample lies inside one initial cluster (T-Linkage samples locally).
+        sample lies inside one initial cluster (T-Linkage samples locally). Three noisy
+        points extrapolate poorly, and with the cutoff ``5 tau_t`` a poor hypothesis can
+        be preferred by parts of two objects, which then merge; so by default only the
+        initial clusters' fits are used.
     min_cluster_size : int, default=4
         Final clusters with fewer correspondences are labelled ``-1``.
     sigma_floor : float or None, default=None
@@ -324,8 +327,9 @@ class TLinkage(BaseRegistration):
 
     **Cost.** Residuals of all ``n`` points under all ``H`` hypotheses, in blocks of
     bounded memory; a dense ``U x U`` distance matrix over the ``U`` units; each merge
-    costs ``O(U H)``. With 100 initial clusters a 22k-correspondence scene takes well
-    under a second.
+    reads the rows of the hypotheses the merged cluster prefers, ``O(U H)`` at worst.
+    With 100 initial clusters (plus a thousand unclustered points) a 22k-correspondence
+    scene takes about 0.1 s with ``n_hypotheses=0`` and 0.5 s with 1000.
 
     :meth:`predict` gives each correspondence to the cluster whose motion has the
     smallest residual, if that residual is at most ``5 tau_t`` (where the preference
