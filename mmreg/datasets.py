@@ -13,6 +13,8 @@ from sklearn.utils import Bunch, check_random_state
 __all__ = ["SHAPES", "make_scene"]
 
 SHAPES = ("sphere", "box", "cylinder", "torus", "plane")
+# Farthest reach of any unit shape from its centre: the corners of the 1 x 1 plane.
+_UNIT_RADIUS = np.sqrt(0.5)
 
 
 def _unit_shape(shape, n, rng):
@@ -70,7 +72,8 @@ def make_scene(
         Fraction of correspondences that are outliers: a-points farther than
         ``separation`` from every object, b-points anywhere in the scene's box.
     object_size : float, default=1.0
-        Diameter of each object, in metres.
+        Extent of each object, in metres: shapes of width about ``object_size``, each
+        within a ball of radius ``object_size / sqrt(2)``.
     separation : float, default=2.0
         Smallest gap between objects' a-points (and between outliers and objects).
     same_motion : int, default=0
@@ -108,9 +111,10 @@ def make_scene(
     if sizes.min() < 1:
         raise ValueError(f"n_points={n_points} is too few for {n_objects} objects.")
 
-    # Objects on a cubic grid whose pitch keeps every gap above `separation`.
+    # Objects on a cubic grid whose pitch keeps every gap above `separation`: each object
+    # lies within a ball of radius _UNIT_RADIUS * object_size around its centre.
     side = int(np.ceil(n_objects ** (1 / 3)))
-    pitch = object_size + separation
+    pitch = 2 * _UNIT_RADIUS * object_size + separation
     cells = np.array([(i, j, k) for i in range(side) for j in range(side) for k in range(side)])
     centers = cells[rng.permutation(len(cells))[:n_objects]] * pitch
     a_parts = []
