@@ -17,7 +17,12 @@ __all__ = [
     "minimum_spanning_forest",
     "nearest_in_other_component",
     "radius_graph",
+    "shortest_edges_between_components",
 ]
+
+# Bounding boxes prune the searches between components up to this many components; each
+# costs a pass over the points.
+_BOX_PRUNING_MAX_COMPONENTS = 64
 
 
 def radius_graph(points, radius, *, tree=None):
@@ -139,7 +144,22 @@ def minimum_spanning_forest(n_points, edges, lengths):
     return np.column_stack([tree.row[order], tree.col[order]]).astype(np.intp), tree_lengths
 
 
-def nearest_in_other_component(points, components, *, max_distance=np.inf):
+def _box_gaps(points, components, n_components):
+    """Distance from each point to the nearest bounding box of another component."""
+    order = np.argsort(components, kind="stable")
+    starts = np.searchsorted(components[order], np.arange(n_components))
+    low = np.minimum.reduceat(points[order], starts, axis=0)
+    high = np.maximum.reduceat(points[order], starts, axis=0)
+    gaps = np.full(len(points), np.inf)
+    for c in range(n_components):
+        outside = np.maximum(np.maximum(low[c] - points, points - high[c]), 0)
+        gap = np.sqrt(np.einsum("ij,ij->i", outside, outside))
+        gap[components == c] = np.inf
+        np.minimum(gaps, gap, out=gaps)
+    return gaps
+
+
+def nearest_in_other_component(points, components, *, max_distance=np.inf, sources=None, workers=1):
     """Each point's nearest neighbour among the points of the other components.
 
     Parameters
@@ -149,12 +169,17 @@ def nearest_in_other_component(points, components, *, max_distance=np.inf):
         Non-negative component of each point.
     max_distance : float, default=inf
         Neighbours farther than this are not reported.
+    sources : ndarray of shape (m,), default=None
+        Indices of the points to find neighbours for; None means all. Neighbours are
+        always sought among all points.
+    workers : int, default=1
+        Threads for the KD-tree queries (-1: all processors).
 
     Returns
     -------
     source, target : ndarray of shape (m,)
         ``target[i]`` is the nearest point to ``source[i]`` outside its component, for
-        every point that has one within ``max_distance`` (inclusive).
+        every source point that has one within ``max_distance`` (inclusive).
     distance : ndarray of shape (m,)
 
     Notes
@@ -163,22 +188,86 @@ def nearest_in_other_component(points, components, *, max_distance=np.inf):
     for every bit, the points whose bit is 1 against a KD-tree of those whose bit is 0
     (and vice versa) finds every point's nearest foreign neighbour: ``2 log2(c)`` trees
     for ``c`` components, ``O(n log n log c)`` in all, never a list of all close pairs.
+    With a finite ``max_distance`` and at most 64 components, points farther than it
+    from every other component's bounding box are skipped.
     """
     points = np.asarray(points, dtype=float)
     _, components = np.unique(components, return_inverse=True)
     n = len(points)
+    n_components = int(components.max()) + 1 if n else 0
+    sources = np.arange(n) if sources is None else np.asarray(sources, dtype=np.intp)
+    if np.isfinite(max_distance) and 1 < n_components <= _BOX_PRUNING_MAX_COMPONENTS:
+        sources = sources[_box_gaps(points, components, n_components)[sources] <= max_distance]
     best = np.full(n, np.inf)
     target = np.full(n, -1, dtype=np.intp)
     # cKDTree's bound is strict; the next float up makes it inclusive.
     bound = np.nextafter(max_distance, np.inf)
-    n_bits = int(components.max()).bit_length() if n else 0
-    for bit in range(n_bits):
+    for bit in range(max(n_components - 1, 0).bit_length()):
         side = ((components >> bit) & 1).astype(bool)
-        for mine, other in ((side, ~side), (~side, side)):
-            src, dst = np.flatnonzero(mine), np.flatnonzero(other)
-            dist, idx = cKDTree(points[dst]).query(points[src], k=1, distance_upper_bound=bound)
+        for mine in (side, ~side):
+            src = sources[mine[sources]]
+            if not len(src):
+                continue
+            dst = np.flatnonzero(~mine)
+            dist, idx = cKDTree(points[dst]).query(
+                points[src], k=1, distance_upper_bound=bound, workers=workers
+            )
             better = dist < best[src]
             best[src[better]] = dist[better]
             target[src[better]] = dst[idx[better]]
     found = np.flatnonzero(target >= 0)
     return found, target[found], best[found]
+
+
+def shortest_edges_between_components(points, components, *, workers=1):
+    """Each component's shortest edge to another component: one Boruvka step.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    components : ndarray of shape (n,)
+        Non-negative component of each point; at least two components.
+    workers : int, default=1
+        Threads for the KD-tree queries (-1: all processors).
+
+    Returns
+    -------
+    edges : ndarray of shape (n_components, 2)
+        For each component (in increasing order), a closest pair ``(p, q)`` with ``p``
+        in it and ``q`` in another component.
+    lengths : ndarray of shape (n_components,)
+
+    Notes
+    -----
+    With at most 64 components, a few points of each bound its shortest edge from
+    above, and only the points within that bound of another component's bounding box
+    are searched: for separated objects, the facing sides.
+    """
+    points = np.asarray(points, dtype=float)
+    _, components = np.unique(components, return_inverse=True)
+    n_components = int(components.max()) + 1
+    if n_components > _BOX_PRUNING_MAX_COMPONENTS:
+        source, target, dist = nearest_in_other_component(points, components, workers=workers)
+    else:
+        order = np.argsort(components, kind="stable")
+        sizes = np.bincount(components, minlength=n_components)
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        # Up to 16 points of each component, spread over its indices.
+        take = np.minimum(sizes, 16)
+        offsets = np.arange(take.sum()) - np.repeat(np.cumsum(take) - take, take)
+        samples = order[np.repeat(starts, take) + offsets * np.repeat(sizes // take, take)]
+        source, _, dist = nearest_in_other_component(
+            points, components, sources=samples, workers=workers
+        )
+        bound = np.full(n_components, np.inf)
+        np.minimum.at(bound, components[source], dist)
+        gaps = _box_gaps(points, components, n_components)
+        candidates = np.flatnonzero(gaps <= bound[components])
+        source, target, dist = nearest_in_other_component(
+            points, components, max_distance=bound.max(), sources=candidates, workers=workers
+        )
+    order = np.lexsort((dist, components[source]))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = components[source[order[1:]]] != components[source[order[:-1]]]
+    keep = order[first]
+    return np.column_stack([source[keep], target[keep]]), dist[keep]

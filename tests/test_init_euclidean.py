@@ -9,7 +9,12 @@ from hypothesis import strategies as st
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import cdist
 
-from mmreg._neighbors import cluster_components, minimum_spanning_forest
+from mmreg._neighbors import (
+    cluster_components,
+    minimum_spanning_forest,
+    nearest_in_other_component,
+    shortest_edges_between_components,
+)
 from mmreg.datasets import make_scene
 from mmreg.init import EuclideanClustering, euclidean_clustering
 
@@ -198,3 +203,45 @@ def test_bad_input():
     init = EuclideanClustering(n_clusters=2).fit(X)
     with pytest.raises(ValueError, match="features"):
         init.transform(X[:, :4])
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_components=st.sampled_from([2, 3, 7, 70]),
+    max_distance=st.sampled_from([np.inf, 0.5, 2.0]),
+)
+def test_nearest_in_other_component_matches_brute_force(seed, n_components, max_distance):
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0, 10, size=(150, 3))
+    components = rng.integers(0, n_components, size=150) * 3  # need not be compact
+    if len(np.unique(components)) < 2:
+        return
+    sources = np.sort(rng.choice(150, size=40, replace=False))
+    dist = cdist(points, points)
+    dist[components[:, None] == components[None, :]] = np.inf
+    for given_sources, expected_sources in ((None, np.arange(150)), (sources, sources)):
+        source, target, lengths = nearest_in_other_component(
+            points, components, max_distance=max_distance, sources=given_sources
+        )
+        nearest = dist[expected_sources].min(axis=1)
+        within = expected_sources[nearest <= max_distance]
+        np.testing.assert_array_equal(source, within)
+        np.testing.assert_allclose(lengths, dist[within].min(axis=1))
+        np.testing.assert_allclose(dist[source, target], lengths)
+
+
+@given(seed=st.integers(0, 2**32 - 1), n_components=st.sampled_from([2, 5, 70]))
+def test_shortest_edges_between_components_matches_brute_force(seed, n_components):
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform(0, 20, size=(n_components, 3))
+    components = np.arange(200) % n_components
+    points = centers[components] + rng.normal(size=(200, 3))
+    edges, lengths = shortest_edges_between_components(points, components)
+    dist = cdist(points, points)
+    dist[components[:, None] == components[None, :]] = np.inf
+    expected = [dist[components == c].min() for c in range(n_components)]
+    np.testing.assert_allclose(lengths, expected)
+    np.testing.assert_array_equal(components[edges[:, 0]], np.arange(n_components))
+    np.testing.assert_allclose(
+        np.linalg.norm(points[edges[:, 0]] - points[edges[:, 1]], axis=1), lengths
+    )

@@ -24,6 +24,7 @@ from mmreg._neighbors import (
     connected_labels,
     minimum_spanning_forest,
     nearest_in_other_component,
+    shortest_edges_between_components,
 )
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 
@@ -88,7 +89,11 @@ def _choose_radius(n_points, forest, forest_lengths, n_clusters, min_cluster_siz
     components among several trees (the forest must be completed first); otherwise
     ``(radius, components, reached)``.
     """
-    thresholds = np.unique(forest_lengths)
+    # The lengths are sorted: their distinct values are where they change.
+    changes = np.flatnonzero(np.diff(forest_lengths)) + 1
+    thresholds = (
+        forest_lengths[np.concatenate([[0], changes])] if len(forest_lengths) else forest_lengths
+    )
     n_edges = np.searchsorted(forest_lengths, thresholds, side="right")
     last = len(thresholds) - 1
     # A forest with e edges has n - e components, and at most that many large ones.
@@ -150,25 +155,48 @@ class _MissingEdges:
 
     An edge ``(p, q)`` of length ``<= r`` that the k-NN graph lacks needs both ``p`` and
     ``q`` saturated: each has its ``k`` listed neighbours within ``r``, else the other would
-    be listed. Saturated points' close pairs are listed once for a radius and kept, so a
-    later check at a radius no larger only filters them; when there would be too many
-    pairs, each point's nearest neighbour in another component is searched instead.
+    be listed. The saturated points' neighbours within ``r`` are listed (more nearest
+    neighbours, bounded by ``r``, until every list ends before ``r``) and kept, so a later
+    check at a radius no larger only filters them. When that would list too many pairs,
+    each saturated point's nearest neighbour in another component is searched instead.
     """
 
-    def __init__(self, points, reach, n_neighbors):
+    def __init__(self, points, tree, reach, n_neighbors, workers):
         self.points = points
+        self.tree = tree
         self.reach = reach
         self.n_neighbors = n_neighbors
+        self.workers = workers
         self.listed_radius = -np.inf
 
     def _list_pairs(self, saturated, radius):
-        pairs = cKDTree(self.points[saturated]).query_pairs(radius, output_type="ndarray")
-        self.pairs = saturated[pairs]
-        lengths = np.linalg.norm(
-            self.points[self.pairs[:, 0]] - self.points[self.pairs[:, 1]], axis=1
-        )
-        # The tree found these within the radius; rounding in the norm must not undo that.
-        self.lengths = np.minimum(lengths, radius)
+        n = len(self.points)
+        bound = np.nextafter(radius, np.inf)
+        sources, targets, lengths = [], [], []
+        # In the tree's order, consecutive queries touch the same nodes: much faster.
+        position = np.empty(n, dtype=np.intp)
+        position[self.tree.indices] = np.arange(n)
+        todo = saturated[np.argsort(position[saturated])]
+        k = min(2 * (self.n_neighbors + 1), n)
+        while len(todo):
+            dist, idx = self.tree.query(
+                self.points[todo], k=k, distance_upper_bound=bound, workers=self.workers
+            )
+            dist, idx = dist.reshape(len(todo), k), idx.reshape(len(todo), k)
+            # Lists that reach the radius may miss neighbours: ask again for twice as many.
+            full = np.isfinite(dist[:, -1]) & (k < n)
+            row, col = np.nonzero(np.isfinite(dist) & ~full[:, None])
+            # Only pairs of saturated points can be missing from the k-NN graph; each pair
+            # is listed from both ends, so keep one.
+            other = idx[row, col]
+            keep = (self.reach[other] <= radius) & (todo[row] < other)
+            sources.append(todo[row[keep]])
+            targets.append(idx[row[keep], col[keep]])
+            lengths.append(dist[row[keep], col[keep]])
+            todo, k = todo[full], min(2 * k, n)
+        self.pairs = np.column_stack([np.concatenate(sources), np.concatenate(targets)])
+        # The query found these within the bound; keep that rounding from crossing radius.
+        self.lengths = np.minimum(np.concatenate(lengths), radius)
         self.listed_radius = radius
 
     def __call__(self, components, radius):
@@ -182,7 +210,10 @@ class _MissingEdges:
             expected_pairs = np.sum((self.n_neighbors + 1) * ratio ** self.points.shape[1])
             if expected_pairs > _PAIRS_PER_POINT * len(self.points):
                 source, target, lengths = nearest_in_other_component(
-                    self.points[saturated], components[saturated], max_distance=radius
+                    self.points[saturated],
+                    components[saturated],
+                    max_distance=radius,
+                    workers=self.workers,
                 )
                 return saturated[np.column_stack([source, target])], np.minimum(lengths, radius)
             self._list_pairs(saturated, radius)
@@ -192,23 +223,16 @@ class _MissingEdges:
         return pairs[across], lengths[across]
 
 
-def _complete_forest(points, forest, forest_lengths):
+def _complete_forest(points, forest, forest_lengths, workers):
     """Join the trees of the forest into one by Boruvka steps on the true distances."""
     n = len(points)
     while True:
-        n_trees, trees = connected_components(
-            sparse.coo_matrix(
-                (np.ones(len(forest), dtype=bool), (forest[:, 0], forest[:, 1])), shape=(n, n)
-            ),
-            directed=False,
-        )
-        if n_trees <= 1:
+        trees = _components(n, forest)
+        if trees.max() == 0:
             return forest, forest_lengths
-        source, target, lengths = nearest_in_other_component(points, trees)
+        edges, lengths = shortest_edges_between_components(points, trees, workers=workers)
         forest, forest_lengths = minimum_spanning_forest(
-            n,
-            np.vstack([forest, np.column_stack([source, target])]),
-            np.concatenate([forest_lengths, lengths]),
+            n, np.vstack([forest, edges]), np.concatenate([forest_lengths, lengths])
         )
 
 
@@ -217,11 +241,11 @@ def _radius_for_count(points, n_clusters, min_cluster_size, n_neighbors, workers
     tree = cKDTree(points)
     edges, lengths, reach = _knn_edges(points, tree, n_neighbors, workers)
     forest, forest_lengths = minimum_spanning_forest(n, edges, lengths)
-    missing_edges = _MissingEdges(points, reach, n_neighbors)
+    missing_edges = _MissingEdges(points, tree, reach, n_neighbors, workers)
     while True:
         choice = _choose_radius(n, forest, forest_lengths, n_clusters, min_cluster_size)
         if choice is None:
-            forest, forest_lengths = _complete_forest(points, forest, forest_lengths)
+            forest, forest_lengths = _complete_forest(points, forest, forest_lengths, workers)
             continue
         radius, components, reached = choice
         missing, missing_lengths = missing_edges(components, radius)
