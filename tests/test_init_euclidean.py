@@ -144,7 +144,7 @@ def test_fewer_clusters_than_separated_objects():
 def test_unreachable_count_warns_and_uses_best_radius():
     points = np.array([[0.0], [1.0], [3.0], [6.0]])
     X = np.hstack([points, points])
-    with pytest.warns(UserWarning, match="No radius gives n_clusters=3"):
+    with pytest.warns(UserWarning, match="No radius tried gives n_clusters=3"):
         init = EuclideanClustering(n_clusters=3, min_cluster_size=2).fit(X)
     # Never more than one component of two points: the largest radius with one is used.
     assert init.n_clusters_ == 1

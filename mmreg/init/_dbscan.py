@@ -63,7 +63,7 @@ class DBSCANClustering(PartitionInitializer):
         only; neighbours at exactly ``eps`` do not count); ``"sklearn"``:
         :class:`sklearn.cluster.DBSCAN` (any dimension; neighbours at ``eps`` count).
         ``"auto"`` uses Open3D for 3-D points when it is installed, else scikit-learn:
-        Open3D was 2 to 4 times faster on the paper-sized scenes (see Notes). Open3D is
+        Open3D was about twice as fast on the paper-sized scenes (see Notes). Open3D is
         imported on first use, which takes about a second once per process.
     n_jobs : int or None, default=None
         Parallel jobs for the scikit-learn backend's neighbour search; Open3D uses its
@@ -99,11 +99,13 @@ class DBSCANClustering(PartitionInitializer):
     n_clusters_)``; a new correspondence joins the cluster of its nearest core point if
     that is within ``eps``, like a border point.
 
-    Timings on this project's 2-core machine (``make_scene(noise=0.03)``; Open3D 0.20,
-    scikit-learn 1.9): 22,395 points, ``eps=0.05, min_samples=10``: Open3D 0.06 s,
-    scikit-learn 0.22 s; ``eps=0.1``: 0.17 s and 0.32 s; 100,000 points, ``eps=0.03``:
-    0.43 s and 1.1 s. With an ``eps`` covering whole objects (``eps=0.5``, thousands of
-    neighbours per point) scikit-learn is faster (1.9 s against 3.3 s).
+    Timings on this project's 2-core machine (best of 3, ``make_scene(noise=0.03)``,
+    Open3D 0.20, scikit-learn 1.9; both gave identical labels): 22,395 points,
+    ``eps=0.05``: Open3D 0.06 s, scikit-learn 0.13 s; ``eps=0.1, min_samples=10``:
+    0.11 s and 0.17 s; 100,000 points, ``eps=0.03``: 0.35 s and 0.73 s. With an ``eps``
+    covering whole objects (``eps=0.5``, thousands of neighbours per point)
+    scikit-learn is faster: 0.78 s against 1.6 s. Importing Open3D takes about 1 s,
+    once per process.
 
     References
     ----------

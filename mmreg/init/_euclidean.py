@@ -2,13 +2,14 @@
 
 With ``radius`` given this is PCL's Euclidean cluster extraction. Otherwise the radius is
 chosen so that about ``n_clusters`` components have ``min_cluster_size`` points or more.
-The components at every radius are read off a minimum spanning forest (single linkage),
-which is built from a k-nearest-neighbour graph and then made exact up to the chosen
-radius: a radius-graph edge missing from the k-NN graph can only join two points that
-both have all their ``k`` nearest neighbours within the radius ("saturated" points), so
-only those are searched for edges between different components, and any found are added
-before choosing again.
-"""
+The components at every radius are read off a minimum spanning forest (single linkage)
+of a k-nearest-neighbour graph, which is then made exact up to the chosen radius: a
+radius-graph edge missing from the k-NN graph can only join two points that both have
+all their ``k`` nearest neighbours within the radius ("saturated" points), so only those
+are searched for edges between different components; any found are added to the forest
+and the radius is chosen again. When the k-NN graph falls apart into more pieces than
+the count asked for (far-apart objects, few clusters wanted), Boruvka steps on the true
+distances first join its trees."""
 
 import warnings
 from numbers import Integral, Real
@@ -309,9 +310,9 @@ def euclidean_clustering(
         if not reached:
             found = int(np.count_nonzero(np.bincount(components) >= min_cluster_size))
             warnings.warn(
-                f"No radius gives n_clusters={n_clusters} clusters of at least "
-                f"min_cluster_size={min_cluster_size} points; using the radius {radius:.6g} "
-                f"with {found}. Lower n_clusters or min_cluster_size.",
+                f"No radius tried gives n_clusters={n_clusters} clusters of at least "
+                f"min_cluster_size={min_cluster_size} points; using the radius {radius:.6g}, "
+                f"which gives the most ({found}). Lower n_clusters or min_cluster_size.",
                 UserWarning,
                 stacklevel=2,
             )
@@ -336,8 +337,9 @@ class EuclideanClustering(PartitionInitializer):
     n_clusters : int or None, default=100
         Number of clusters of at least ``min_cluster_size`` points to aim for. The count
         changes by one cluster at a time as the radius grows, so it is met exactly unless
-        several components merge at the same distance (or no radius reaches it: then the
-        closest count found is used, with a warning). Ignored when ``radius`` is given.
+        several components merge at the same distance, or the count is out of reach: then
+        the radius giving the most clusters among those tried is used, with a warning.
+        Ignored when ``radius`` is given.
     radius : float or None, default=None
         Largest gap within a cluster, in the units of the points. None chooses it from
         ``n_clusters``.
@@ -378,10 +380,16 @@ class EuclideanClustering(PartitionInitializer):
     not allowed to merge them).
 
     Cost: one k-NN query (``O(n k log n)``), one minimum spanning forest of its ``n k``
-    edges, ``O(log n)`` connected-component passes over the forest to choose the radius,
-    and one search for close pairs among the points whose ``k`` nearest neighbours are
-    all within the radius. With an explicit ``radius`` it is the radius graph's
-    components, whose cost grows with the number of pairs within ``radius``.
+    edges, connected-component passes over ever fewer contracted components to choose
+    the radius (``O(n)`` in all), and one listing of the pairs within the radius among
+    the points whose ``k`` nearest neighbours all lie within it. On this project's
+    2-core machine, ``make_scene(noise=0.03)`` with ``n_clusters=100`` took 0.13 s for
+    22,395 points, 0.5 s for 100,000 and 9 s for 1,000,000 (where the pair listing,
+    about 12 pairs per point, and the spanning forest dominate). Asking for fewer
+    clusters than there are far-apart groups of points adds Boruvka steps, ``O(n log n)``
+    each (22,395 points, 7 objects, ``n_clusters=5``: 0.3 to 0.9 s). With an explicit
+    ``radius`` the cost is that of the radius graph, which grows with the number of
+    pairs within ``radius``.
 
     References
     ----------
