@@ -39,34 +39,43 @@ class ClusterGate:
     n_clusters : int
     radius : float or None
         The gate distance ``tau``; None admits every cluster everywhere.
+    centers : ndarray of shape (n_clusters, d), default=None
+        Centroid of each cluster's points, if already known.
+    spread : ndarray of shape (n,), default=None
+        Distance of each clustered point to its cluster's centroid, if already known.
     """
 
-    def __init__(self, points, labels, n_clusters, radius):
+    def __init__(self, points, labels, n_clusters, radius, *, centers=None, spread=None):
         self.radius = radius
         self.n_clusters = n_clusters
         if radius is None:
             return
         points = np.asarray(points, dtype=float)
-        labels = np.asarray(labels)
-        keep = labels >= 0
-        if not keep.all():
-            points, labels = points[keep], labels[keep]
+        labels = np.asarray(labels, dtype=np.intp)
+        # Points in no cluster go to an extra group n_clusters, so that every per-cluster
+        # reduction below runs over all points without first copying out a subset.
+        if len(labels) and labels.min() < 0:
+            labels = np.where(labels < 0, n_clusters, labels)
         self._points = points
         self._labels = labels
         self._members = None
         self._trees = {}
-        n, d = points.shape
-        counts = np.bincount(labels, minlength=n_clusters)[:n_clusters]
-        safe = np.maximum(counts, 1)
-        self._centers = np.empty((n_clusters, d))
-        for axis in range(d):
-            self._centers[:, axis] = np.bincount(
-                labels, weights=points[:, axis], minlength=n_clusters
-            )[:n_clusters]
-        self._centers /= safe[:, None]
-        spread = np.sqrt(np.sum((points - self._centers[labels]) ** 2, axis=1))
-        self._ball_radius = np.full(n_clusters, -np.inf)
-        np.maximum.at(self._ball_radius, labels, spread)
+        if centers is None:
+            counts = np.bincount(labels, minlength=n_clusters + 1)[: n_clusters + 1]
+            centers = np.empty((n_clusters + 1, points.shape[1]))
+            for axis in range(points.shape[1]):
+                centers[:, axis] = np.bincount(
+                    labels, weights=points[:, axis], minlength=n_clusters + 1
+                )[: n_clusters + 1]
+            centers /= np.maximum(counts, 1)[:, None]
+            centers = centers[:n_clusters]
+        self._centers = np.asarray(centers, dtype=float).reshape(n_clusters, points.shape[1])
+        if spread is None:
+            centred = points - np.vstack([self._centers, np.zeros(points.shape[1])])[labels]
+            spread = np.sqrt(np.einsum("ij,ij->i", centred, centred))
+        ball_radius = np.full(n_clusters + 1, -np.inf)
+        np.maximum.at(ball_radius, labels, spread)
+        self._ball_radius = ball_radius[:n_clusters]
         self._spread = spread
         self._representatives = None
 
@@ -76,15 +85,24 @@ class ClusterGate:
         Returns the sorted cluster indices; a superset of every cluster the gate admits
         for a query point inside the box.
         """
+        return np.flatnonzero(self.reach_boxes(low[None], high[None])[0])
+
+    def reach_boxes(self, low, high):
+        """Boolean ``(m, K)``: may cluster ``j`` be admitted anywhere in box ``i``?
+
+        ``low`` and ``high`` of shape ``(m, d)`` are the corners of ``m`` boxes. False
+        means that the bounding ball of the cluster, grown by ``radius``, misses the box.
+        """
         if self.radius is None:
-            return np.arange(self.n_clusters)
-        gap = np.maximum(np.maximum(low - self._centers, self._centers - high), 0.0)
-        sq = np.einsum("kj,kj->k", gap, gap)
+            return np.ones((len(low), self.n_clusters), dtype=bool)
+        centers = self._centers[None]
+        gap = np.maximum(np.maximum(low[:, None] - centers, centers - high[:, None]), 0.0)
+        sq = np.einsum("mkj,mkj->mk", gap, gap)
         reach = self._ball_radius + self.radius
         # A relative slack keeps rounding from closing an open gate; the exact test
         # decides every pair that survives.
         slack = 1e-9 * (1.0 + reach**2)
-        return np.flatnonzero((reach >= 0) & (sq < reach**2 + slack))
+        return (reach >= 0) & (sq < reach**2 + slack)
 
     def maybe_within(self, query):
         """Boolean ``(m, K)``: False where the bounding ball proves the gate closed."""
@@ -138,16 +156,17 @@ class ClusterGate:
         Returns point indices of shape ``(n_clusters, 3)``; an empty cluster's row points
         at a member of no particular cluster, whose test its closed ball overrides.
         """
-        n = len(self._labels)
-        representatives = np.zeros((self.n_clusters, 3), dtype=np.intp)
-        nearest = np.full(self.n_clusters, np.inf)
-        np.minimum.at(nearest, self._labels, self._spread)
-        hit = np.flatnonzero(self._spread == nearest[self._labels])
-        representatives[self._labels[hit], 0] = hit
+        k, labels, spread = self.n_clusters, self._labels, self._spread
+        n = len(labels)
+        representatives = np.zeros((k + 1, 3), dtype=np.intp)
+        nearest = np.full(k + 1, np.inf)
+        np.minimum.at(nearest, labels, spread)
+        hit = np.flatnonzero(spread == nearest[labels])
+        representatives[labels[hit], 0] = hit
         # Fancy assignment keeps the last write: the last and the first member.
-        representatives[self._labels, 1] = np.arange(n)
-        representatives[self._labels[::-1], 2] = np.arange(n)[::-1]
-        return representatives
+        representatives[labels, 1] = np.arange(n)
+        representatives[labels[::-1], 2] = np.arange(n)[::-1]
+        return representatives[:k]
 
     def within(self, query, cluster):
         """Exact gate of ``query`` points (m, d) against one cluster; boolean (m,)."""
@@ -174,9 +193,10 @@ class ClusterGate:
     def _cluster_points(self, cluster):
         if self._members is None:
             # Group the points by cluster once, on the first exact test that needs it.
-            small = self._labels.astype(np.uint16) if self.n_clusters <= 2**16 else self._labels
+            k = self.n_clusters
+            small = self._labels.astype(np.uint16) if k < 2**16 else self._labels
             order = np.argsort(small, kind="stable")
-            counts = np.bincount(self._labels, minlength=self.n_clusters)
+            counts = np.bincount(self._labels, minlength=k + 1)
             self._members = (self._points[order], np.concatenate([[0], np.cumsum(counts)]))
         points, bounds = self._members
         return points[bounds[cluster] : bounds[cluster + 1]]
@@ -218,71 +238,79 @@ def gated_argmax(scores, query, gate, own=None, *, columns=None, tolerance=None,
         return labels
     if columns is None:
         columns = np.arange(k)
-    own_column = np.full(m, -1, dtype=np.intp)
-    if own is None:
-        own = own_column
-    else:
+    rows = np.arange(m)
+    candidate = np.argmax(scores, axis=1)
+    refined = None
+    if refine is not None:
+        refined = np.zeros(m, dtype=bool)
+        _refine_near_ties(scores, rows, candidate, tolerance, refine, refined)
+    best = scores[rows, candidate]
+    own_score = np.full(m, -np.inf)
+    if own is not None:
         has_own = np.flatnonzero(own >= 0)
-        own_column[has_own] = np.searchsorted(columns, own[has_own])
-    refined = np.zeros(m, dtype=bool)
-    pending = np.arange(m)
+        own_column = np.searchsorted(columns, own[has_own])
+        own_score[has_own] = scores[has_own, own_column]
+        # By default a row stays where it is: in its own cluster, or in none.
+        labels[has_own] = own[has_own]
+    # Rows with a cluster strictly better than their own one (or any finite one if they
+    # have none) move there if the gate admits it; ties keep the own cluster.
+    pending = np.flatnonzero(best > own_score)
+    if gate.radius is None:
+        labels[pending] = columns[candidate[pending]]
+        return labels
     rounds = 0
     while len(pending):
-        candidate = np.argmax(scores if rounds == 0 else scores[pending], axis=1)
-        if refine is not None:
-            _refine_near_ties(scores, pending, candidate, tolerance, refine, refined)
-        best = scores[pending, candidate]
-        own_score = np.full(len(pending), -np.inf)
-        has_own = own_column[pending] >= 0
-        own_score[has_own] = scores[pending[has_own], own_column[pending[has_own]]]
-        settle = (best <= own_score) | ~np.isfinite(best)
-        settled = pending[settle]
-        labels[settled] = np.where(np.isfinite(own_score[settle]), own[settled], -1)
-        pending, candidate = pending[~settle], candidate[~settle]
-        if gate.radius is None:
-            labels[pending] = columns[candidate]
-            break
-        admitted = gate.admits(query[pending], columns[candidate])
-        labels[pending[admitted]] = columns[candidate[admitted]]
-        scores[pending[~admitted], candidate[~admitted]] = -np.inf
+        admitted = gate.admits(query[pending], columns[candidate[pending]])
+        labels[pending[admitted]] = columns[candidate[pending[admitted]]]
         pending = pending[~admitted]
+        if len(pending) == 0:
+            break
+        scores[pending, candidate[pending]] = -np.inf
         rounds += 1
-        if rounds == 2 and len(pending):
+        if rounds == 2:
             # Rows still undecided tend to face many closed gates (say, far objects with
             # the same motion): rule out at once every cluster whose ball is out of reach.
             closed = ~gate._ball_open(query[pending, None, :], columns[None, :])
             sub = scores[pending]
             sub[closed] = -np.inf
             scores[pending] = sub
+        candidate[pending] = np.argmax(scores[pending], axis=1)
+        if refine is not None:
+            _refine_near_ties(scores, pending, candidate, tolerance, refine, refined)
+        pending = pending[scores[pending, candidate[pending]] > own_score[pending]]
     return labels
 
 
-def _refine_near_ties(scores, pending, candidate, tolerance, refine, refined):
+def _refine_near_ties(scores, rows, candidate, tolerance, refine, refined):
     """Recompute the rows whose best column is not clearly ahead of every other one.
 
-    ``candidate`` (the arg-max of each pending row) is updated in place.
+    ``rows`` are the rows to check, ``candidate`` the arg-max of every row of ``scores``
+    (updated in place for the recomputed rows), ``refined`` marks the rows recomputed so
+    far (updated in place).
     """
-    todo = np.flatnonzero(~refined[pending])
-    if len(todo) == 0:
+    rows = rows[~refined[rows]]
+    if len(rows) == 0:
         return
-    whole = len(todo) == len(scores)
-    rows = pending[todo]
+    whole = len(rows) == len(scores)
     table = scores if whole else scores[rows]
-    best = table[np.arange(len(rows)), candidate[todo]]
-    # A cheap test with the largest tolerance first, the exact one on the few survivors.
+    best = scores[rows, candidate[rows]]
+    # A cheap test with the largest tolerance first: a row has a near-tie if the first and
+    # the last column within reach of its best one differ (two arg-max calls, which are
+    # much faster than counting along a short axis); the exact test on the survivors.
     near = table >= (best - 2 * tolerance.max())[:, None]
-    maybe = np.flatnonzero(np.count_nonzero(near, axis=1) > 1)
+    first = np.argmax(near, axis=1)
+    last = np.argmax(near[:, ::-1], axis=1)
+    maybe = np.flatnonzero(first + last != len(tolerance) - 1)
     if len(maybe) == 0:
         return
-    floor = best[maybe] - tolerance[candidate[todo[maybe]]]
+    floor = best[maybe] - tolerance[candidate[rows[maybe]]]
     near = table[maybe] + tolerance >= floor[:, None]
-    ambiguous = todo[maybe[np.count_nonzero(near, axis=1) > 1]]
+    ambiguous = rows[maybe[np.count_nonzero(near, axis=1) > 1]]
     if len(ambiguous) == 0:
         return
-    rows = pending[ambiguous]
-    accurate = refine(rows)
+    accurate = refine(ambiguous)
     # Keep the clusters already ruled out by the gate ruled out.
-    accurate[np.isneginf(scores[rows])] = -np.inf
-    scores[rows] = accurate
-    refined[rows] = True
+    accurate[np.isneginf(scores[ambiguous])] = -np.inf
+    scores[ambiguous] = accurate
+    refined[ambiguous] = True
     candidate[ambiguous] = np.argmax(accurate, axis=1)

@@ -5,6 +5,8 @@ the metrics and the theory checks. Every function works in any dimension ``d >= 
 (points are rows of ``(n, d)`` arrays); the package mostly uses ``d = 3``.
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import sparse
 
@@ -96,15 +98,33 @@ def fit_rigid_grouped(a, b, labels, n_groups):
     keep = labels >= 0
     a_rows = np.asarray(a, dtype=float)[keep].T
     b_rows = np.asarray(b, dtype=float)[keep].T
-    rotations, translations, counts, _, _ = fit_rigid_rows(a_rows, b_rows, labels[keep], n_groups)
-    return rotations, translations, counts
+    fit = fit_rigid_rows(a_rows, b_rows, labels[keep], n_groups)
+    return fit.rotations, fit.translations, fit.counts
+
+
+@dataclass
+class GroupedFit:
+    """What :func:`fit_rigid_rows` returns."""
+
+    rotations: np.ndarray
+    translations: np.ndarray
+    counts: np.ndarray
+    centroids: np.ndarray
+    """Centroid of each group's a-points, ``(n_groups, d)``."""
+    centred: np.ndarray
+    """Each a-point less its group's centroid, ``(d, n)``."""
+    residuals: np.ndarray
+    """``b - R a - t`` of each correspondence under its group's motion, ``(d, n)``."""
+    indicator: sparse.csc_matrix
+    """:func:`one_hot` of the labels, for further per-group sums."""
 
 
 def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
-    """:func:`fit_rigid_grouped` on coordinate rows, also returning the residuals.
+    """:func:`fit_rigid_grouped` on coordinate rows, with the by-products an EM needs.
 
     The workhorse of the EM's M-step: coordinates are rows of ``(d, n)`` arrays, so that
-    each per-group sum is one weighted ``np.bincount`` over a contiguous row.
+    every per-point operation runs over contiguous rows, and every per-group sum is one
+    product with the sparse :func:`one_hot` matrix of the labels.
 
     Parameters
     ----------
@@ -116,13 +136,9 @@ def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
 
     Returns
     -------
-    rotations, translations, counts
-        As :func:`fit_rigid_grouped`.
-    residuals : ndarray of shape (d, n)
-        ``b - R a - t`` of every correspondence under its group's motion, computed from
+    GroupedFit
+        Motions and counts as :func:`fit_rigid_grouped`; the residuals are computed from
         the centred points (no cancellation far from the origin).
-    indicator : sparse matrix of shape (n_groups, n)
-        :func:`one_hot` of ``labels``, for further per-group sums.
     """
     d = len(a_rows)
     labels = np.asarray(labels, dtype=np.intp)
@@ -155,12 +171,12 @@ def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
     rotations[counts == 0] = np.eye(d)
     translations = centroid_b.T - np.einsum("kij,jk->ki", rotations, centroid_a)
     # t = centroid_b - R centroid_a, so b - R a - t = (b - centroid_b) - R (a - centroid_a).
-    residuals = cb.copy()
+    residuals = cb
     per_point = np.take(rotations.reshape(n_groups, d * d).T, labels, axis=1)
     for p in range(d):
         for q in range(d):
             residuals[p] -= per_point[p * d + q] * ca[q]
-    return rotations, translations, counts, residuals, indicator
+    return GroupedFit(rotations, translations, counts, centroid_a.T, ca, residuals, indicator)
 
 
 def fit_rigid(a, b):

@@ -40,42 +40,78 @@ def default_sigma_floor(b):
     return 1e-6 * spread if spread > 0 else 1e-6
 
 
+def _size_rank(labels, n_clusters):
+    """New number of each cluster so that 0 is the largest; ties keep their order.
+
+    Returns ``rank`` of length ``n_clusters + 1`` with ``rank[-1] == -1``, so that
+    ``rank[labels]`` also maps the unclustered points.
+    """
+    counts = np.bincount(labels + 1, minlength=n_clusters + 1)[1:]
+    order = np.argsort(-counts, kind="stable")
+    rank = np.full(n_clusters + 1, -1, dtype=np.intp)
+    rank[order] = np.arange(n_clusters)
+    return rank
+
+
 def _relabel_by_size(labels, n_clusters):
     """Renumber clusters so that 0 is the largest; ties keep their previous order."""
-    counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
-    order = np.argsort(-counts, kind="stable")
-    rank = np.empty(n_clusters, dtype=np.intp)
-    rank[order] = np.arange(n_clusters)
-    out = labels.copy()
-    out[labels >= 0] = rank[labels[labels >= 0]]
-    return out
+    return _size_rank(labels, n_clusters)[labels]
 
 
 def fit_cluster_models(a, b, labels, n_clusters, sigma_floor):
     """Pose, weight and noise scale of every cluster (Algorithm 1, lines 3-6)."""
-    keep = labels >= 0
-    rows = np.asarray(a, dtype=float)[keep].T, np.asarray(b, dtype=float)[keep].T
-    return _fit_cluster_rows(*rows, labels[keep], n_clusters, sigma_floor, len(a))
+    a_rows = np.ascontiguousarray(np.asarray(a, dtype=float).T)
+    b_rows = np.ascontiguousarray(np.asarray(b, dtype=float).T)
+    return _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor)[0]
 
 
-def _fit_cluster_rows(a_rows, b_rows, labels, n_clusters, sigma_floor, n_total):
-    """:func:`fit_cluster_models` on the ``(d, m)`` coordinate rows of clustered points."""
-    rotations, translations, counts, res, indicator = fit_rigid_rows(
-        a_rows, b_rows, labels, n_clusters
-    )
+def _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor):
+    """:func:`fit_cluster_models` on ``(d, n)`` coordinate rows.
+
+    Returns the five arrays of :func:`fit_cluster_models`, the
+    :class:`~mmreg._geometry.GroupedFit` with the per-point by-products and each point's
+    squared residual under its cluster's motion (over all ``n`` points; those of
+    unclustered points are meaningless).
+    """
+    n_total = len(labels)
+    # Unclustered points form an extra group, so no subset of the points is ever copied;
+    # the per-group sums of the real clusters are unchanged by it.
+    if n_total and labels.min() < 0:
+        labels = np.where(labels < 0, n_clusters, labels)
+        n_groups = n_clusters + 1
+    else:
+        n_groups = n_clusters
+    fit = fit_rigid_rows(a_rows, b_rows, labels, n_groups)
+    counts = fit.counts[:n_clusters]
     weights = counts / n_total
     # sigma_j = sqrt(tr(cov(E_j)) / d), sample covariance (ddof=1) of the residuals.
     d = len(a_rows)
-    moments = np.empty((d + 1, len(labels)))
-    moments[:d] = res
-    np.einsum("ij,ij->j", res, res, out=moments[d])
-    sums = np.asarray(indicator @ moments.T)
+    moments = np.empty((d + 1, n_total))
+    moments[:d] = fit.residuals
+    np.einsum("ij,ij->j", fit.residuals, fit.residuals, out=moments[d])
+    sums = np.asarray(fit.indicator @ moments.T)[:n_clusters]
     mean_sq_norm = np.sum(sums[:, :d] ** 2, axis=1) / np.maximum(counts, 1)
     scatter = np.maximum(sums[:, d] - mean_sq_norm, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         sigmas = np.sqrt(scatter / (d * (counts - 1)))
     sigmas[counts < 2] = sigma_floor
-    return rotations, translations, np.maximum(sigmas, sigma_floor), weights, counts
+    sigmas = np.maximum(sigmas, sigma_floor)
+    models = (
+        fit.rotations[:n_clusters],
+        fit.translations[:n_clusters],
+        sigmas,
+        weights,
+        counts,
+    )
+    return models, fit, moments[d]
+
+
+def _compact(labels, n_clusters):
+    """:func:`~mmreg._validation.compact_labels` for labels already in ``-1..K-1``."""
+    present = np.bincount(labels + 1, minlength=n_clusters + 1)[1:] > 0
+    rank = np.full(n_clusters + 1, -1, dtype=np.intp)
+    rank[:n_clusters][present] = np.arange(np.count_nonzero(present))
+    return rank[labels], int(np.count_nonzero(present))
 
 
 def multi_model_em(
@@ -108,10 +144,13 @@ def multi_model_em(
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
     labels, n_clusters = compact_labels(init_labels)
+    a_rows = np.ascontiguousarray(np.asarray(a, dtype=float).T)
+    b_rows = np.ascontiguousarray(np.asarray(b, dtype=float).T)
     # The a-points never move: their blocks and residual features serve every E-step.
     blocks = CorrespondenceBlocks(a, b) if max_iter > 0 and n_clusters > 0 else None
     n_iter = 0
     converged = False
+    models = None
     for _ in range(max_iter):
         if n_clusters == 0:
             # Nothing left to fit or to assign to: the labels cannot change any more.
@@ -119,19 +158,25 @@ def multi_model_em(
             break
         n_iter += 1
         # Lines 2-7: pose, weight pi_j = |H_j| / n and sigma_j of every cluster.
-        rotations, translations, sigmas, weights, counts = fit_cluster_models(
-            a, b, labels, n_clusters, sigma_floor
-        )
+        models, fit, own_sq = _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor)
+        rotations, translations, sigmas, weights, counts = models
         # Lines 10-13: clusters below m_min leave H before the M-step; their points keep
         # no "own" cluster and must be won by another one (or become outliers).
         kept = np.flatnonzero(counts >= min_cluster_size)
-        position = np.full(n_clusters, -1, dtype=np.intp)
+        # position[-1] == -1 maps the unclustered points too.
+        position = np.full(n_clusters + 1, -1, dtype=np.intp)
         position[kept] = np.arange(len(kept))
-        own = np.full(len(labels), -1, dtype=np.intp)
-        own[labels >= 0] = position[labels[labels >= 0]]
+        own = position[labels]
         # Lines 8-9 and 15-18: E-step and classification M-step, gated by d_cluster <= tau
         # measured against the clusters as they were when the poses were fitted.
-        gate = ClusterGate(a, own, len(kept), tau)
+        gate = ClusterGate(
+            a,
+            own,
+            len(kept),
+            tau,
+            centers=fit.centroids[kept],
+            spread=np.sqrt(np.einsum("ij,ij->j", fit.centred, fit.centred)),
+        )
         new = classify(
             a,
             b,
@@ -142,15 +187,23 @@ def multi_model_em(
             gate,
             own,
             blocks=blocks,
+            own_squared_residuals=own_sq,
         )
-        new_in_old_ids = np.full(len(new), -1, dtype=np.intp)
-        new_in_old_ids[new >= 0] = kept[new[new >= 0]]
+        new_in_old_ids = np.append(kept, -1)[new]
         if np.array_equal(new_in_old_ids, labels):
             converged = True
             break
-        labels, n_clusters = compact_labels(new_in_old_ids)
-    labels = _relabel_by_size(labels, n_clusters)
-    rotations, translations, sigmas, weights, _ = fit_cluster_models(
-        a, b, labels, n_clusters, sigma_floor
-    )
+        labels, n_clusters = _compact(new_in_old_ids, n_clusters)
+        models = None
+    rank = _size_rank(labels, n_clusters)
+    labels = rank[labels]
+    if models is None:
+        rotations, translations, sigmas, weights, _ = fit_cluster_models(
+            a, b, labels, n_clusters, sigma_floor
+        )
+    else:
+        # The last M-step fitted exactly these clusters: renumbering them changes neither
+        # the points nor their order within a cluster, so a refit would give the same.
+        order = np.argsort(rank[:n_clusters])
+        rotations, translations, sigmas, weights = (x[order] for x in models[:4])
     return EMResult(labels, rotations, translations, sigmas, weights, n_iter, converged)
