@@ -12,7 +12,6 @@ from sklearn.cluster import KMeans
 from sklearn.metrics import adjusted_rand_score
 from sklearn.model_selection import GridSearchCV
 from sklearn.utils import check_random_state
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mmreg import MultiModelRegistration
 from mmreg._geometry import fit_rigid, rotation_angle
@@ -422,47 +421,3 @@ def test_fit_predict_pickle_and_predict_checks(method):
         est.predict(GOOD.X[:, :4])
     with pytest.raises(ValueError, match="NaN"):
         est.predict(np.full((3, 6), np.nan))
-
-
-# --- scikit-learn's estimator checks -------------------------------------------------------
-
-# X holds stacked correspondences [a | b], so it must have an even number of columns.
-ODD_COLUMNS = "the check uses X with an odd number of columns, which are not [a | b] pairs"
-ODD_COLUMN_CHECKS = (
-    "check_dict_unchanged",
-    "check_dont_overwrite_parameters",
-    "check_estimators_dtypes",
-    "check_estimators_nan_inf",
-    "check_estimators_pickle",
-    "check_f_contiguous_array_estimator",
-    "check_fit2d_predict1d",
-    "check_fit_score_takes_y",
-    "check_methods_sample_order_invariance",
-    "check_methods_subset_invariance",
-    "check_pipeline_consistency",
-)
-MOTION_NOT_BLOBS = (
-    "the check wants the 2-D blobs of make_blobs as clusters; read as 1-D correspondences "
-    "b = a + t they are no rigid motions, and SequentialRANSAC groups by motion only"
-)
-
-
-def expected_failed_checks(estimator):
-    failures = dict.fromkeys(ODD_COLUMN_CHECKS, ODD_COLUMNS)
-    if isinstance(estimator, SequentialRANSAC):
-        failures["check_clustering"] = MOTION_NOT_BLOBS
-    return failures
-
-
-@parametrize_with_checks(
-    [
-        NaiveRegistration(),
-        NaiveRegistration(init=KMeans(n_clusters=3, n_init=1), random_state=0),
-        SequentialRANSAC(random_state=0),
-        TLinkage(),
-        TLinkage(init=KMeans(n_clusters=3, n_init=1), n_hypotheses=20, random_state=0),
-    ],
-    expected_failed_checks=expected_failed_checks,
-)
-def test_sklearn_compatible_baseline(estimator, check):
-    check(estimator)

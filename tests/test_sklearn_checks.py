@@ -1,9 +1,16 @@
-"""scikit-learn's own estimator checks on MultiModelRegistration."""
+"""scikit-learn's own estimator checks on every estimator of the package."""
 
+import numpy as np
 from sklearn.cluster import KMeans
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from mmreg import MultiModelRegistration
+from mmreg import MultiModelRegistration, NaiveRegistration, SequentialRANSAC, TLinkage
+from mmreg.init import (
+    DBSCANClustering,
+    EuclideanClustering,
+    PrecomputedLabels,
+    PrecomputedMasks,
+)
 
 # X holds stacked correspondences [a | b], so it must have an even number of columns.
 # These checks feed data with 3 or 5 columns and cannot apply; every other check must pass.
@@ -20,28 +27,61 @@ ODD_COLUMN_CHECKS = (
     "check_methods_sample_order_invariance",
     "check_methods_subset_invariance",
     "check_pipeline_consistency",
+    # Transformers only (the initialisers):
+    "check_transformer_data_not_an_array",
+    "check_transformer_general",
 )
-
-
 BLOBS_ARE_NOT_MOTIONS = (
-    "check_clustering reads 50 Gaussian blobs in 2 columns as 1-D correspondences; they are "
-    "not rigid motions, and the default 100-cluster Euclidean init cannot split 50 points"
+    "check_clustering reads 50 Gaussian blobs in 2 columns as 1-D correspondences b = a + t; "
+    "they are no rigid motions, and this estimator groups by motion (the EM from the default "
+    "100-cluster init merges the blobs, which share one translation; RANSAC uses the motion only)"
+)
+# Precomputed labels and pixels belong to one X: these checks fit on X of other lengths.
+FIXED_ROWS = "the labels (or pixels) are given for 30 rows; the check fits on another number"
+FIXED_ROW_CHECKS = (
+    "check_clustering",
+    "check_dtype_object",
+    "check_estimators_fit_returns_self",
+    "check_estimators_overwrite_params",
+    "check_fit2d_1sample",
+    "check_fit_check_is_fitted",
+    "check_fit_idempotent",
+    "check_n_features_in",
+    "check_n_features_in_after_fitting",
+    "check_positive_only_tag_during_fit",
+    "check_readonly_memmap_input",
 )
 
 
 def expected_failed_checks(estimator):
     failures = dict.fromkeys(ODD_COLUMN_CHECKS, ODD_COLUMNS)
-    if estimator.init == "euclidean":
+    default_em = isinstance(estimator, MultiModelRegistration) and estimator.init == "euclidean"
+    if default_em or isinstance(estimator, SequentialRANSAC):
         failures["check_clustering"] = BLOBS_ARE_NOT_MOTIONS
+    if isinstance(estimator, (PrecomputedLabels, PrecomputedMasks)):
+        failures.update(dict.fromkeys(FIXED_ROW_CHECKS, FIXED_ROWS))
     return failures
+
+
+ROWS = np.arange(30)
 
 
 @parametrize_with_checks(
     [
         MultiModelRegistration(),
         MultiModelRegistration(tau=None, init=KMeans(n_clusters=3, n_init=1), random_state=0),
+        NaiveRegistration(),
+        NaiveRegistration(init=KMeans(n_clusters=3, n_init=1), random_state=0),
+        SequentialRANSAC(random_state=0),
+        TLinkage(),
+        TLinkage(init=KMeans(n_clusters=3, n_init=1), n_hypotheses=20, random_state=0),
+        EuclideanClustering(n_clusters=3, min_cluster_size=1),
+        EuclideanClustering(radius=0.5),
+        DBSCANClustering(eps=0.5, backend="sklearn"),
+        PrecomputedLabels(ROWS % 3),
+        PrecomputedMasks(ROWS.reshape(5, 6) % 4, np.column_stack([ROWS % 6, ROWS // 6])),
     ],
     expected_failed_checks=expected_failed_checks,
 )
-def test_sklearn_compatible_estimator(estimator, check):
+def test_sklearn_compatible(estimator, check):
     check(estimator)
