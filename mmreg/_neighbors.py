@@ -3,7 +3,8 @@
 A set of points is *tau-connected* (Section IV) when any two of them are joined by a
 chain of points with consecutive gaps of at most ``tau``: exactly when the radius graph
 with edges ``||p - q|| <= tau`` is connected. These helpers are shared by the Euclidean
-initialiser, the partition diagnostics and the checks of Definitions 1 and 2.
+initialiser and the tests; :mod:`mmreg._connectivity` finds tau-connected pieces without
+listing the pairs, for the large ``tau`` of the gate.
 """
 
 import numpy as np
@@ -12,7 +13,6 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
 __all__ = [
-    "cluster_components",
     "connected_labels",
     "minimum_spanning_forest",
     "nearest_in_other_component",
@@ -63,43 +63,6 @@ def connected_labels(points, radius, *, tree=None):
     """
     graph = radius_graph(points, radius, tree=tree)
     return connected_components(graph, directed=False)
-
-
-def cluster_components(points, labels, radius, *, graph=None):
-    """How many ``radius``-connected pieces each cluster falls into.
-
-    Parameters
-    ----------
-    points : ndarray of shape (n, d)
-    labels : ndarray of shape (n,)
-        Cluster of each point; negative labels are ignored.
-    radius : float
-    graph : sparse matrix, default=None
-        The radius graph of ``points`` if already built.
-
-    Returns
-    -------
-    pieces : ndarray of shape (n_clusters,)
-        ``pieces[j] == 1`` iff cluster ``j`` is ``radius``-connected (0 for empty
-        clusters). ``n_clusters`` is ``labels.max() + 1``.
-    """
-    labels = np.asarray(labels)
-    n_clusters = int(labels.max()) + 1 if labels.size and labels.max() >= 0 else 0
-    if graph is None:
-        graph = radius_graph(points, radius)
-    coo = sparse.coo_matrix(graph)
-    # Keep only the edges inside one cluster: the components of what remains are the
-    # connected pieces of each cluster.
-    same = (labels[coo.row] == labels[coo.col]) & (labels[coo.row] >= 0)
-    inner = sparse.coo_matrix(
-        (np.ones(int(same.sum()), dtype=bool), (coo.row[same], coo.col[same])), shape=graph.shape
-    )
-    _, comp = connected_components(inner, directed=False)
-    keep = labels >= 0
-    if not keep.any():
-        return np.zeros(n_clusters, dtype=np.intp)
-    distinct = np.unique(np.column_stack([labels[keep], comp[keep]]), axis=0)
-    return np.bincount(distinct[:, 0], minlength=n_clusters)
 
 
 def minimum_spanning_forest(n_points, edges, lengths):

@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.distance import cdist
 
+from mmreg._connectivity import min_gap_between
 from mmreg._neighbors import connected_labels
 from mmreg.datasets import make_scene
 from mmreg.testing import (
@@ -21,7 +22,6 @@ from mmreg.theory import (
     satisfies_ground_truth,
     tau_components,
 )
-from mmreg.theory._connectivity import min_gap_between
 
 slow_data = settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 

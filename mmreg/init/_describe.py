@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 from sklearn.utils.validation import check_array
 
-from mmreg._neighbors import cluster_components
+from mmreg._connectivity import cluster_components
 from mmreg._validation import check_labels, split_correspondences
 
 __all__ = ["describe_partition"]
@@ -38,9 +38,9 @@ def describe_partition(labels, X, tau=None):
 
     Notes
     -----
-    The pieces come from the radius graph of the a-points, whose size grows with the
-    number of pairs closer than ``tau``: for ``tau`` far above the sampling gap of dense
-    clouds, describe a subsample.
+    The pieces come from a grid of cells of diameter ``tau``
+    (:func:`mmreg.theory.tau_components`), never from the list of all pairs closer than
+    ``tau``, so a large ``tau`` on a dense cloud costs no more than a small one.
 
     Examples
     --------

@@ -13,9 +13,9 @@ from scipy.spatial import cKDTree
 from sklearn.utils import check_array
 from sklearn.utils._param_validation import Interval, StrOptions, validate_params
 
+from mmreg._connectivity import min_gap_between, tau_components
 from mmreg._geometry import residuals
 from mmreg._validation import check_labels, compact_labels, split_correspondences
-from mmreg.theory._connectivity import min_gap_between, tau_components
 from mmreg.theory._reports import Condition, GoodClusteringReport, GroundTruthReport
 
 __all__ = ["is_good_clustering", "is_tau_connected", "satisfies_ground_truth"]

@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 
 from mmreg._neighbors import radius_graph
 
-__all__ = ["min_gap_between", "tau_components"]
+__all__ = ["cluster_components", "min_gap_between", "tau_components"]
 
 # Largest number of point pairs compared in one vectorised block of exact checks.
 _PAIR_BUDGET = 2**21
@@ -189,6 +189,33 @@ def tau_components(points, tau, groups=None):
             _, comp = _components(n_cells, np.concatenate(edges1), np.concatenate(edges2))
     n_components, comp = _components(n_cells, np.concatenate(edges1), np.concatenate(edges2))
     return n_components, comp[cell_of].astype(np.intp)
+
+
+def cluster_components(points, labels, radius):
+    """How many ``radius``-connected pieces each cluster falls into.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    labels : ndarray of shape (n,)
+        Cluster of each point; negative labels are ignored.
+    radius : float
+
+    Returns
+    -------
+    pieces : ndarray of shape (n_clusters,)
+        ``pieces[j] == 1`` iff cluster ``j`` is ``radius``-connected (0 for empty
+        clusters). ``n_clusters`` is ``labels.max() + 1``.
+    """
+    points = np.asarray(points, dtype=float)
+    labels = np.asarray(labels)
+    n_clusters = int(labels.max()) + 1 if labels.size and labels.max() >= 0 else 0
+    keep = labels >= 0
+    if not keep.any():
+        return np.zeros(n_clusters, dtype=np.intp)
+    _, pieces = tau_components(points[keep], radius, labels[keep])
+    distinct = np.unique(np.column_stack([labels[keep], pieces]), axis=0)
+    return np.bincount(distinct[:, 0], minlength=n_clusters)
 
 
 def min_gap_between(points, labels):
