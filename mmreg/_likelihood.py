@@ -347,6 +347,8 @@ def classify(
     *,
     blocks=None,
     own_squared_residuals=None,
+    settled=None,
+    changed=None,
 ):
     """Classification step: each correspondence to its most likely admitted cluster.
 
@@ -363,6 +365,12 @@ def classify(
     own_squared_residuals : ndarray of shape (n,), default=None
         ``||b - R a - t||^2`` of each correspondence under its own cluster's motion, if
         already known (the M-step computes them).
+    settled, changed : ndarray of shape (n,) and (K,), default=None
+        For a classification that repeats an earlier one: which correspondences stayed in
+        their cluster the last time, and which clusters have changed since (in members,
+        hence in motion, weight, noise scale and gate). Rows that stayed, next to none
+        but unchanged clusters, face the very comparisons that kept them in place, so
+        they stay again without being scored.
 
     Returns
     -------
@@ -383,6 +391,8 @@ def classify(
     sorted_own = floor = None
     if own is not None:
         sorted_own = own[blocks.order]
+        if settled is not None:
+            settled = settled[blocks.order] & (sorted_own >= 0)
         if own_squared_residuals is not None:
             own_squared_residuals = own_squared_residuals[blocks.order]
         floor = blocks.own_score_floor(
@@ -397,19 +407,21 @@ def classify(
             sorted_own,
             floor,
             sorted_labels,
+            None if own is None or changed is None else (settled, changed),
         )
     labels[blocks.order] = sorted_labels
     return labels
 
 
-def _classify_blocks(blocks, parameters, gate, sorted_own, floor, sorted_labels):
+def _classify_blocks(blocks, parameters, gate, sorted_own, floor, sorted_labels, repeat=None):
     """The loop of :func:`classify` over blocks, on the sorted correspondences.
 
     In each sub-block, a row is scored against the clusters in reach of the gate, less,
     for a row with an own cluster, every cluster that provably scores below the worst
     own score of the sub-block (:meth:`CorrespondenceBlocks.column_bounds`): such a
     cluster can neither beat nor tie any row's own cluster. Consecutive sub-blocks of a
-    block that keep similar clusters are scored together.
+    block that keep similar clusters are scored together. ``repeat`` is ``(settled,
+    changed)`` of :func:`classify` (sorted), to skip the sub-blocks that cannot change.
     """
     for block, (start, stop) in enumerate(zip(blocks.starts, blocks.stops, strict=True)):
         subs = blocks.subs_of(block)
@@ -423,6 +435,17 @@ def _classify_blocks(blocks, parameters, gate, sorted_own, floor, sorted_labels)
             own = sorted_own[start:stop]
             orphan = own < 0
             owned = np.flatnonzero(~orphan)
+            if len(owned) and repeat is not None:
+                # Sub-blocks whose rows all stayed last time, and see no changed cluster
+                # (not even their own), keep their labels.
+                settled, changed = repeat
+                calm = np.logical_and.reduceat(settled[start:stop], offsets)
+                calm &= ~(reach & changed).any(axis=1)
+                calm &= ~np.logical_or.reduceat(changed[np.maximum(own, 0)] & ~orphan, offsets)
+                if calm.any():
+                    still = calm[owned // blocks.sub_rows]
+                    sorted_labels[start + owned[still]] = own[owned[still]]
+                    owned = owned[~still]
             if len(owned):
                 worst = np.minimum.reduceat(np.where(orphan, np.inf, floor[start:stop]), offsets)
                 bounds = blocks.column_bounds(subs, *parameters)
@@ -430,6 +453,15 @@ def _classify_blocks(blocks, parameters, gate, sorted_own, floor, sorted_labels)
                 # A point's own cluster is always in reach and always scored; make sure
                 # rounding cannot drop it.
                 keep[owned // blocks.sub_rows, own[owned]] = True
+                if repeat is not None:
+                    # The same test on the clusters left after pruning.
+                    calm = np.logical_and.reduceat(settled[start:stop], offsets)
+                    calm &= ~(keep & changed).any(axis=1)
+                    if calm.any():
+                        still = calm[owned // blocks.sub_rows]
+                        sorted_labels[start + owned[still]] = own[owned[still]]
+                        owned = owned[~still]
+                    keep[calm] = False
                 for rows, columns in _runs(keep, offsets, start, owned):
                     if len(columns) == 1:
                         # Every row's own cluster, and nothing else can beat it.

@@ -107,11 +107,14 @@ def _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor):
 
 
 def _compact(labels, n_clusters):
-    """:func:`~mmreg._validation.compact_labels` for labels already in ``-1..K-1``."""
+    """:func:`~mmreg._validation.compact_labels` for labels already in ``-1..K-1``.
+
+    Also returns which of the ``K`` clusters are present (kept, in order).
+    """
     present = np.bincount(labels + 1, minlength=n_clusters + 1)[1:] > 0
     rank = np.full(n_clusters + 1, -1, dtype=np.intp)
     rank[:n_clusters][present] = np.arange(np.count_nonzero(present))
-    return rank[labels], int(np.count_nonzero(present))
+    return rank[labels], int(np.count_nonzero(present)), present
 
 
 def multi_model_em(
@@ -151,6 +154,9 @@ def multi_model_em(
     n_iter = 0
     converged = False
     models = None
+    # What the last E-step left alone: its points face the same comparisons again unless
+    # a cluster near them changed, so the next E-step can skip them.
+    settled = changed = None
     for _ in range(max_iter):
         if n_clusters == 0:
             # Nothing left to fit or to assign to: the labels cannot change any more.
@@ -188,12 +194,20 @@ def multi_model_em(
             own,
             blocks=blocks,
             own_squared_residuals=own_sq,
+            settled=settled,
+            changed=None if changed is None else changed[kept],
         )
         new_in_old_ids = np.append(kept, -1)[new]
-        if np.array_equal(new_in_old_ids, labels):
+        settled = new_in_old_ids == labels
+        if settled.all():
             converged = True
             break
-        labels, n_clusters = _compact(new_in_old_ids, n_clusters)
+        # A cluster changes when a point leaves or joins it; the last slot takes -1.
+        touched = np.zeros(n_clusters + 1, dtype=bool)
+        touched[labels[~settled]] = True
+        touched[new_in_old_ids[~settled]] = True
+        labels, n_clusters, present = _compact(new_in_old_ids, n_clusters)
+        changed = touched[:-1][present]
         models = None
     rank = _size_rank(labels, n_clusters)
     labels = rank[labels]
