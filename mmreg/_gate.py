@@ -246,10 +246,11 @@ def gated_argmax(scores, query, gate, own=None, *, columns=None, tolerance=None,
         _refine_near_ties(scores, rows, candidate, tolerance, refine, refined)
     best = scores[rows, candidate]
     own_score = np.full(m, -np.inf)
+    own_column = np.full(m, -1, dtype=np.intp)
     if own is not None:
         has_own = np.flatnonzero(own >= 0)
-        own_column = np.searchsorted(columns, own[has_own])
-        own_score[has_own] = scores[has_own, own_column]
+        own_column[has_own] = np.searchsorted(columns, own[has_own])
+        own_score[has_own] = scores[has_own, own_column[has_own]]
         # By default a row stays where it is: in its own cluster, or in none.
         labels[has_own] = own[has_own]
     # Rows with a cluster strictly better than their own one (or any finite one if they
@@ -276,7 +277,10 @@ def gated_argmax(scores, query, gate, own=None, *, columns=None, tolerance=None,
             scores[pending] = sub
         candidate[pending] = np.argmax(scores[pending], axis=1)
         if refine is not None:
-            _refine_near_ties(scores, pending, candidate, tolerance, refine, refined)
+            redone = _refine_near_ties(scores, pending, candidate, tolerance, refine, refined)
+            # Compare accurate scores with accurate scores.
+            redone = redone[own_column[redone] >= 0]
+            own_score[redone] = scores[redone, own_column[redone]]
         pending = pending[scores[pending, candidate[pending]] > own_score[pending]]
     return labels
 
@@ -286,11 +290,12 @@ def _refine_near_ties(scores, rows, candidate, tolerance, refine, refined):
 
     ``rows`` are the rows to check, ``candidate`` the arg-max of every row of ``scores``
     (updated in place for the recomputed rows), ``refined`` marks the rows recomputed so
-    far (updated in place).
+    far (updated in place). Returns the rows recomputed now.
     """
+    none = np.zeros(0, dtype=np.intp)
     rows = rows[~refined[rows]]
     if len(rows) == 0:
-        return
+        return none
     whole = len(rows) == len(scores)
     table = scores if whole else scores[rows]
     best = scores[rows, candidate[rows]]
@@ -302,15 +307,16 @@ def _refine_near_ties(scores, rows, candidate, tolerance, refine, refined):
     last = np.argmax(near[:, ::-1], axis=1)
     maybe = np.flatnonzero(first + last != len(tolerance) - 1)
     if len(maybe) == 0:
-        return
+        return none
     floor = best[maybe] - tolerance[candidate[rows[maybe]]]
     near = table[maybe] + tolerance >= floor[:, None]
     ambiguous = rows[maybe[np.count_nonzero(near, axis=1) > 1]]
     if len(ambiguous) == 0:
-        return
+        return none
     accurate = refine(ambiguous)
     # Keep the clusters already ruled out by the gate ruled out.
     accurate[np.isneginf(scores[ambiguous])] = -np.inf
     scores[ambiguous] = accurate
     refined[ambiguous] = True
     candidate[ambiguous] = np.argmax(accurate, axis=1)
+    return ambiguous

@@ -8,7 +8,6 @@ the metrics and the theory checks. Every function works in any dimension ``d >= 
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import sparse
 
 __all__ = [
     "apply_motions",
@@ -44,20 +43,14 @@ def group_sums(values, labels, n_groups):
     keep = labels >= 0
     if not keep.all():
         values, labels = values[keep], labels[keep]
-    return np.asarray(one_hot(labels, n_groups) @ values)
-
-
-def one_hot(labels, n_groups):
-    """Sparse ``(n_groups, n)`` indicator matrix of ``labels`` (all in ``0..n_groups-1``).
-
-    ``one_hot(labels, K) @ values`` sums the rows of ``values`` per group in one pass,
-    adding each group's rows in their order. In CSC form the matrix needs no sorting to
-    build, since every column holds exactly one entry.
-    """
-    n = len(labels)
-    return sparse.csc_matrix(
-        (np.ones(n), np.asarray(labels, dtype=np.intp), np.arange(n + 1)), shape=(n_groups, n)
-    )
+    sums = np.empty((n_groups, values.shape[1]))
+    # One weighted bincount per column: one pass each, adding each group's rows in their
+    # order (the same order, hence the same rounding, as a one-hot sparse product).
+    for column in range(values.shape[1]):
+        sums[:, column] = np.bincount(labels, weights=values[:, column], minlength=n_groups)[
+            :n_groups
+        ]
+    return sums
 
 
 def fit_rigid_grouped(a, b, labels, n_groups):
@@ -115,16 +108,14 @@ class GroupedFit:
     """Each a-point less its group's centroid, ``(d, n)``."""
     residuals: np.ndarray
     """``b - R a - t`` of each correspondence under its group's motion, ``(d, n)``."""
-    indicator: sparse.csc_matrix
-    """:func:`one_hot` of the labels, for further per-group sums."""
 
 
 def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
     """:func:`fit_rigid_grouped` on coordinate rows, with the by-products an EM needs.
 
     The workhorse of the EM's M-step: coordinates are rows of ``(d, n)`` arrays, so that
-    every per-point operation runs over contiguous rows, and every per-group sum is one
-    product with the sparse :func:`one_hot` matrix of the labels.
+    every per-point operation, and every per-group sum (a weighted ``np.bincount``), runs
+    over contiguous rows.
 
     Parameters
     ----------
@@ -144,22 +135,22 @@ def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
     labels = np.asarray(labels, dtype=np.intp)
     counts = np.bincount(labels, minlength=n_groups)[:n_groups]
     safe = np.maximum(counts, 1)
-    indicator = one_hot(labels, n_groups)
 
-    def sums(rows):
-        return np.asarray(indicator @ rows.T).T
+    def sums(row):
+        # One pass per row, adding each group's values in their order.
+        return np.bincount(labels, weights=row, minlength=n_groups)[:n_groups]
 
-    centroid_a = sums(a_rows) / safe  # (d, n_groups)
-    centroid_b = sums(b_rows) / safe
+    centroid_a = np.stack([sums(row) for row in a_rows]) / safe  # (d, n_groups)
+    centroid_b = np.stack([sums(row) for row in b_rows]) / safe
     # Centre before forming outer products: sum(a b^T) - m ca cb^T cancels badly far
     # from the origin.
     ca = a_rows - np.take(centroid_a, labels, axis=1)
     cb = b_rows - np.take(centroid_b, labels, axis=1)
-    outer = np.empty((d * d, len(labels)))
+    cross = np.empty((n_groups, d, d))
+    product = np.empty(len(labels))
     for p in range(d):
         for q in range(d):
-            np.multiply(ca[p], cb[q], out=outer[p * d + q])
-    cross = sums(outer).T.reshape(n_groups, d, d)
+            cross[:, p, q] = sums(np.multiply(ca[p], cb[q], out=product))
     u, _, vt = np.linalg.svd(cross)
     v = np.swapaxes(vt, -1, -2)
     ut = np.swapaxes(u, -1, -2)
@@ -176,7 +167,7 @@ def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
     for p in range(d):
         for q in range(d):
             residuals[p] -= per_point[p * d + q] * ca[q]
-    return GroupedFit(rotations, translations, counts, centroid_a.T, ca, residuals, indicator)
+    return GroupedFit(rotations, translations, counts, centroid_a.T, ca, residuals)
 
 
 def fit_rigid(a, b):
@@ -282,16 +273,23 @@ def degenerate_groups(a, labels, n_groups, *, rtol=1e-10):
     dimensions (in 3-D: not collinear, not coincident). Returns a boolean mask of the
     groups whose point covariance has rank below ``d - 1`` (relative tolerance ``rtol``).
     """
-    a = np.asarray(a, dtype=float)
-    labels = np.asarray(labels)
-    d = a.shape[1]
-    counts = np.bincount(labels[labels >= 0], minlength=n_groups)[:n_groups]
-    safe = np.maximum(counts, 1)[:, None]
-    keep = labels >= 0
-    lab = labels[keep]
-    centred = a[keep] - (group_sums(a, labels, n_groups) / safe)[lab]
-    outer = (centred[:, :, None] * centred[:, None, :]).reshape(len(lab), d * d)
-    scatter = group_sums(outer, lab, n_groups).reshape(n_groups, d, d)
+    rows = np.ascontiguousarray(np.asarray(a, dtype=float).T)
+    labels = np.asarray(labels, dtype=np.intp)
+    d = len(rows)
+    # Unlabelled points go to an extra group, which is dropped at the end.
+    lab = np.where(labels < 0, n_groups, labels)
+    counts = np.bincount(lab, minlength=n_groups + 1)[: n_groups + 1]
+    centroids = np.stack(
+        [np.bincount(lab, weights=row, minlength=n_groups + 1) for row in rows]
+    ) / np.maximum(counts, 1)
+    centred = rows - np.take(centroids, lab, axis=1)
+    scatter = np.empty((n_groups + 1, d, d))
+    for p in range(d):
+        for q in range(p + 1):
+            scatter[:, p, q] = scatter[:, q, p] = np.bincount(
+                lab, weights=centred[p] * centred[q], minlength=n_groups + 1
+            )
+    scatter = scatter[:n_groups]
     eig = np.linalg.eigvalsh(scatter)[:, ::-1]
     scale = np.maximum(eig[:, 0], np.finfo(float).tiny)
     rank = np.sum(eig > rtol * scale[:, None], axis=1)

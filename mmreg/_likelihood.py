@@ -138,10 +138,11 @@ class CorrespondenceBlocks:
     ----------
     a, b : ndarray of shape (n, d)
         Corresponding points.
-    block_rows : int, default=8192
-        Correspondences per block.
-    sub_rows : int, default=1024
-        Correspondences per sub-block; divides ``block_rows``.
+    block_rows : int, default=None
+        Correspondences per block (8192 if None), rounded down to a multiple of
+        ``sub_rows``.
+    sub_rows : int, default=None
+        Correspondences per sub-block (1024 if None).
 
     Attributes
     ----------
@@ -151,7 +152,7 @@ class CorrespondenceBlocks:
         The points in block order.
     """
 
-    def __init__(self, a, b, block_rows=_BLOCK_ROWS, sub_rows=_SUB_ROWS):
+    def __init__(self, a, b, block_rows=None, sub_rows=None):
         # Coordinates as rows: every per-point operation below runs over contiguous rows.
         a_rows = np.ascontiguousarray(np.asarray(a, dtype=float).T)
         b_rows = np.ascontiguousarray(np.asarray(b, dtype=float).T)
@@ -164,8 +165,10 @@ class CorrespondenceBlocks:
         self._a_rows, self._b_rows = a_rows, b_rows
         # Bound on the size of any point, centroid or difference of two points.
         self.size = d * (np.max(np.abs(a_rows), initial=0) + np.max(np.abs(b_rows), initial=0))
+        sub_rows = _SUB_ROWS if sub_rows is None else sub_rows
+        block_rows = _BLOCK_ROWS if block_rows is None else block_rows
         self.sub_rows = sub_rows
-        self.subs_per_block = block_rows // sub_rows
+        self.subs_per_block = max(1, block_rows // sub_rows)
         block_rows = self.subs_per_block * sub_rows
         self.starts = np.arange(0, n, block_rows)
         self.stops = np.minimum(self.starts + block_rows, n)

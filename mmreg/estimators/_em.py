@@ -86,10 +86,14 @@ def _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor):
     weights = counts / n_total
     # sigma_j = sqrt(tr(cov(E_j)) / d), sample covariance (ddof=1) of the residuals.
     d = len(a_rows)
-    moments = np.empty((d + 1, n_total))
-    moments[:d] = fit.residuals
-    np.einsum("ij,ij->j", fit.residuals, fit.residuals, out=moments[d])
-    sums = np.asarray(fit.indicator @ moments.T)[:n_clusters]
+    squared = np.einsum("ij,ij->j", fit.residuals, fit.residuals)
+    sums = np.stack(
+        [
+            np.bincount(labels, weights=row, minlength=n_groups)[:n_clusters]
+            for row in (*fit.residuals, squared)
+        ],
+        axis=1,
+    )
     mean_sq_norm = np.sum(sums[:, :d] ** 2, axis=1) / np.maximum(counts, 1)
     scatter = np.maximum(sums[:, d] - mean_sq_norm, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -103,7 +107,7 @@ def _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor):
         weights,
         counts,
     )
-    return models, fit, moments[d]
+    return models, fit, squared
 
 
 def _compact(labels, n_clusters):
