@@ -299,13 +299,24 @@ def _refine_near_ties(scores, rows, candidate, tolerance, refine, refined):
     whole = len(rows) == len(scores)
     table = scores if whole else scores[rows]
     best = scores[rows, candidate[rows]]
-    # A cheap test with the largest tolerance first: a row has a near-tie if the first and
-    # the last column within reach of its best one differ (two arg-max calls, which are
-    # much faster than counting along a short axis); the exact test on the survivors.
-    near = table >= (best - 2 * tolerance.max())[:, None]
-    first = np.argmax(near, axis=1)
-    last = np.argmax(near[:, ::-1], axis=1)
-    maybe = np.flatnonzero(first + last != len(tolerance) - 1)
+    # A cheap test with the largest tolerance first, the exact one on the survivors.
+    threshold = best - 2 * tolerance.max()
+    k = len(tolerance)
+    if k <= 16:
+        # Short rows: a near-tie if the first and the last column within reach of the
+        # best one differ (two arg-max calls, much faster than counting along a short
+        # axis).
+        near = table >= threshold[:, None]
+        first = np.argmax(near, axis=1)
+        last = np.argmax(near[:, ::-1], axis=1)
+        maybe = np.flatnonzero(first + last != k - 1)
+    else:
+        # Long rows: the best of the other columns, with the best one masked out.
+        local = np.arange(len(rows))
+        table[local, candidate[rows]] = -np.inf
+        runner_up = table.max(axis=1)
+        table[local, candidate[rows]] = best
+        maybe = np.flatnonzero(runner_up >= threshold)
     if len(maybe) == 0:
         return none
     floor = best[maybe] - tolerance[candidate[rows[maybe]]]

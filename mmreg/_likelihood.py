@@ -22,8 +22,8 @@ __all__ = ["CorrespondenceBlocks", "classify", "cluster_sigmas", "log_weighted_l
 # Correspondences per sub-block, which chooses the clusters to score: small enough for a
 # compact bounding box (few clusters in reach). Blocks, which centre the features and
 # are scored a run of sub-blocks at a time, may be larger, as long as they stay compact.
-_SUB_ROWS = 1024
-_BLOCK_ROWS = 8192
+_SUB_ROWS = 2048
+_BLOCK_ROWS = 16384
 # One more pass over a table costs about as much as scoring this many more cells.
 _PASS_CELLS = 2**15
 # Largest (rows x clusters) score table scored at once: 8 MiB, about the size of a cache.
@@ -139,10 +139,10 @@ class CorrespondenceBlocks:
     a, b : ndarray of shape (n, d)
         Corresponding points.
     block_rows : int, default=None
-        Correspondences per block (8192 if None), rounded down to a multiple of
+        Correspondences per block (16384 if None), rounded down to a multiple of
         ``sub_rows``.
     sub_rows : int, default=None
-        Correspondences per sub-block (1024 if None).
+        Correspondences per sub-block (2048 if None).
 
     Attributes
     ----------
