@@ -26,6 +26,8 @@ _SUB_ROWS = 2048
 _BLOCK_ROWS = 16384
 # One more pass over a table costs about as much as scoring this many more cells.
 _PASS_CELLS = 2**15
+# Rows whose own score is this far below their sub-block's mean are pruned separately.
+_WEAK_SCORE = 2.0
 # Largest (rows x clusters) score table scored at once: 8 MiB, about the size of a cache.
 _BLOCK_CELLS = 2**20
 # Bits of the Morton code per axis (at most 30 bits in all).
@@ -450,28 +452,28 @@ def _classify_blocks(blocks, parameters, gate, sorted_own, floor, sorted_labels,
                     sorted_labels[start + owned[still]] = own[owned[still]]
                     owned = owned[~still]
             if len(owned):
-                worst = np.minimum.reduceat(np.where(orphan, np.inf, floor[start:stop]), offsets)
-                bounds = blocks.column_bounds(subs, *parameters)
-                keep = reach & (bounds >= worst[:, None])
-                # A point's own cluster is always in reach and always scored; make sure
-                # rounding cannot drop it.
-                keep[owned // blocks.sub_rows, own[owned]] = True
+                tiers = _tiers(blocks, subs, parameters, reach, own, owned, floor[start:stop])
                 if repeat is not None:
                     # The same test on the clusters left after pruning.
                     calm = np.logical_and.reduceat(settled[start:stop], offsets)
-                    calm &= ~(keep & changed).any(axis=1)
+                    seen = np.logical_or.reduce([keep for _, keep in tiers])
+                    calm &= ~(seen & changed).any(axis=1)
                     if calm.any():
                         still = calm[owned // blocks.sub_rows]
                         sorted_labels[start + owned[still]] = own[owned[still]]
-                        owned = owned[~still]
-                    keep[calm] = False
-                for rows, columns in _runs(keep, offsets, start, owned):
-                    if len(columns) == 1:
-                        # Every row's own cluster, and nothing else can beat it.
-                        sorted_labels[rows] = columns[0]
-                    else:
-                        work.append((rows, columns, sorted_own))
-            if len(owned) < len(own):
+                        tiers = [
+                            (rows[~calm[rows // blocks.sub_rows]], keep) for rows, keep in tiers
+                        ]
+                        for _, keep in tiers:
+                            keep[calm] = False
+                for rows, keep in tiers:
+                    for run, columns in _runs(keep, offsets, start, rows):
+                        if len(columns) == 1:
+                            # Every row's own cluster, and nothing else can beat it.
+                            sorted_labels[run] = columns[0]
+                        else:
+                            work.append((run, columns, sorted_own))
+            if orphan.any():
                 rows = np.flatnonzero(orphan)
                 columns = np.flatnonzero(reach[np.unique(rows // blocks.sub_rows)].any(axis=0))
                 work.append((start + rows, columns, None))
@@ -493,6 +495,51 @@ def _classify_blocks(blocks, parameters, gate, sorted_own, floor, sorted_labels,
                 own,
                 sorted_labels,
             )
+
+
+def _tiers(blocks, subs, parameters, reach, own, owned, floor):
+    """The clusters to score for the rows of a block that have an own cluster.
+
+    A cluster whose bound (:meth:`CorrespondenceBlocks.column_bounds`) is below every own
+    score of a sub-block's rows cannot beat or tie any of them. A few rows with poor own
+    scores (noise in the tail) would keep nearly every cluster in play for all rows, so
+    the rows well below their sub-block's mean own score form a second tier, pruned
+    with their own worst score.
+
+    Returns ``(rows, keep)`` pairs: sorted rows (relative to the block) and the boolean
+    (sub-block, cluster) table of the clusters to score for them.
+    """
+    n_subs = len(subs)
+    sub_of = owned // blocks.sub_rows
+    scores = floor[owned]
+    count = np.bincount(sub_of, minlength=n_subs)
+    mean = np.bincount(sub_of, weights=scores, minlength=n_subs) / np.maximum(count, 1)
+    weak = scores < mean[sub_of] - _WEAK_SCORE
+    bounds = blocks.column_bounds(subs, *parameters)
+
+    def tier(members):
+        worst = np.full(n_subs, np.inf)
+        np.minimum.at(worst, sub_of[members], scores[members])
+        keep = reach & (bounds >= worst[:, None])
+        # A point's own cluster is always in reach and always scored; make sure rounding
+        # cannot drop it.
+        keep[sub_of[members], own[owned[members]]] = True
+        return owned[members], keep
+
+    single = tier(np.ones(len(owned), dtype=bool))
+    if not weak.any():
+        return [single]
+    tiers = [tier(~weak), tier(weak)]
+
+    def cells(rows, keep):
+        return np.bincount(rows // blocks.sub_rows, minlength=n_subs) @ keep.sum(axis=1)
+
+    # Two tiers cost an extra pass per sub-block with weak rows; worth it when they
+    # score far fewer cells.
+    extra = _PASS_CELLS * len(np.unique(sub_of[weak]))
+    if sum(cells(*t) for t in tiers) + extra < cells(*single):
+        return tiers
+    return [single]
 
 
 def _runs(keep, offsets, start, rows):

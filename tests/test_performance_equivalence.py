@@ -31,14 +31,18 @@ from conftest import split_init  # noqa: E402
 from straightforward_em import straightforward_em  # noqa: E402
 
 
-@pytest.fixture(params=["tiny blocks", "default blocks"])
+@pytest.fixture(params=["tiny blocks", "tiny blocks, two tiers", "default blocks"])
 def block_sizes(request, monkeypatch):
-    """Run with blocks of 64 rows in sub-blocks of 16, and with the defaults."""
-    if request.param == "tiny blocks":
+    """Blocks of 64 rows in sub-blocks of 16 (pruning two tiers of rows whenever there
+    are rows below the mean own score), and the defaults."""
+    if request.param.startswith("tiny blocks"):
         monkeypatch.setattr(likelihood, "_BLOCK_ROWS", 64)
         monkeypatch.setattr(likelihood, "_SUB_ROWS", 16)
         # Score runs of sub-blocks together more eagerly, to exercise the merging.
         monkeypatch.setattr(likelihood, "_PASS_CELLS", 256)
+    if request.param.endswith("two tiers"):
+        monkeypatch.setattr(likelihood, "_WEAK_SCORE", 0.0)
+        monkeypatch.setattr(likelihood, "_PASS_CELLS", -(2**20))
     return request.param
 
 
@@ -68,7 +72,7 @@ def test_em_matches_plain_loop(block_sizes, scene_name, seed, tau):
     assert_array_equal(fast.labels, plain)
 
 
-@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("seed", [0])
 @pytest.mark.parametrize("min_cluster_size", [1, 15, 60])
 @pytest.mark.parametrize("max_iter", [1, 10])
 def test_em_matches_plain_loop_with_removals(block_sizes, seed, min_cluster_size, max_iter):
