@@ -88,6 +88,8 @@ class NaiveRegistration(BaseRegistration):
     array([1., 0., 0.])
     """
 
+    _no_cluster_hint = "The initial clustering left every correspondence unassigned."
+
     _parameter_constraints: dict = {
         **BaseRegistration._parameter_constraints,
         "init": [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"],

@@ -186,6 +186,8 @@ class SequentialRANSAC(BaseRegistration):
     array([1., 0., 0.])
     """
 
+    _no_cluster_hint = "Raise residual_threshold or lower min_inliers."
+
     _parameter_constraints: dict = {
         **BaseRegistration._parameter_constraints,
         "residual_threshold": [Interval(Real, 0, None, closed="neither")],

@@ -357,6 +357,8 @@ class TLinkage(BaseRegistration):
     array([60, 40])
     """
 
+    _no_cluster_hint = "Raise tau_t, lower min_cluster_size, or use a coarser initial clustering."
+
     _parameter_constraints: dict = {
         **BaseRegistration._parameter_constraints,
         "tau_t": [Interval(Real, 0, None, closed="neither")],

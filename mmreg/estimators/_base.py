@@ -41,6 +41,9 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
     Warning: This class should not be used directly. Use derived classes instead.
     """
 
+    # Advice appended to the warning raised when no cluster survives a fit.
+    _no_cluster_hint = ""
+
     _parameter_constraints: dict = {
         "sigma_floor": [Interval(Real, 0, None, closed="neither"), None],
     }
@@ -83,7 +86,7 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         if n_clusters == 0:
             warnings.warn(
                 "No cluster survived: every correspondence is labelled -1 (outlier). "
-                "Lower min_cluster_size, raise tau, or use a coarser initial clustering.",
+                + self._no_cluster_hint,
                 DegenerateInputWarning,
                 stacklevel=3,
             )

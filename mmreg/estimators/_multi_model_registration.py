@@ -122,6 +122,8 @@ class MultiModelRegistration(BaseRegistration):
     array([1., 0., 0.])
     """
 
+    _no_cluster_hint = "Lower min_cluster_size, raise tau, or use a coarser initial clustering."
+
     _parameter_constraints: dict = {
         **BaseRegistration._parameter_constraints,
         "tau": [Interval(Real, 0, None, closed="neither"), None],
