@@ -156,12 +156,21 @@ def fit_rigid_rows(a_rows, b_rows, labels, n_groups):
     ut = np.swapaxes(u, -1, -2)
     sign = np.sign(np.linalg.det(v @ ut))
     sign[sign == 0] = 1.0
-    correction = np.ones((n_groups, d))
-    correction[:, -1] = sign
-    rotations = (v * correction[:, None, :]) @ ut
+    v[:, :, -1] *= sign[:, None]
+    # R = V diag(1, ..., sign) U^T and t = centroid_b - R centroid_a, group by group with
+    # elementwise operations: a group's motion does not depend on the other groups fitted
+    # with it (a batched product may round differently for different batch sizes).
+    rotations = np.zeros((n_groups, d, d))
+    for p in range(d):
+        for q in range(d):
+            for r in range(d):
+                rotations[:, p, q] += v[:, p, r] * ut[:, r, q]
     rotations[counts == 0] = np.eye(d)
-    translations = centroid_b.T - np.einsum("kij,jk->ki", rotations, centroid_a)
-    # t = centroid_b - R centroid_a, so b - R a - t = (b - centroid_b) - R (a - centroid_a).
+    translations = centroid_b.T.copy()
+    for p in range(d):
+        for q in range(d):
+            translations[:, p] -= rotations[:, p, q] * centroid_a[q]
+    # b - R a - t = (b - centroid_b) - R (a - centroid_a).
     residuals = cb
     per_point = np.take(rotations.reshape(n_groups, d * d).T, labels, axis=1)
     for p in range(d):

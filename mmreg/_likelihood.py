@@ -1,14 +1,24 @@
 """The weighted Gaussian likelihood of eq. (7) and the classification step built on it.
 
 The classification step needs, for every correspondence, the arg-max of
-``log(pi_j phi_j(b_i | a_i))`` over the clusters the distance gate admits. A dense
-``(n, K)`` table of scores would cost ``n * K`` work and memory per EM iteration, but the
-gate admits only clusters near the point. So the correspondences are visited in
-spatially compact blocks (Morton order of the a-points); each block scores only the
-clusters whose bounding ball, grown by ``tau``, reaches the block's bounding box, with one
-matrix product. Without a gate every block scores every cluster.
+``log(pi_j phi_j(b_i | a_i))`` over the clusters the distance gate admits, ties going to
+the correspondence's own cluster, then to the lowest index. A dense ``(n, K)`` table of
+scores would cost ``n * K`` work and memory per EM iteration; here, exactly the same
+decisions cost far less:
+
+* the correspondences are visited in spatially compact blocks (Morton order of the
+  a-points), and each sub-block scores only the clusters whose bounding ball, grown by
+  ``tau``, reaches its bounding box (every cluster without a gate);
+* of those, a cluster whose score is provably below every own score in the sub-block
+  (:meth:`CorrespondenceBlocks.column_bounds`) can neither win nor tie, and is left out;
+* the scores of a block come from one matrix product (an expansion of the squared
+  residual), with a bound on their rounding; rows where the best score is not clearly
+  ahead are recomputed from explicit residuals before they are decided;
+* in a repeated classification, sub-blocks whose points stayed put and whose clusters
+  did not change are not scored again.
 """
 
+import contextlib
 import functools
 
 import numpy as np
@@ -99,6 +109,8 @@ def morton_order(points, bits=_MORTON_BITS):
     bits : int, default=10
         Cells per axis ``2**bits`` (fewer if ``d * bits`` would exceed 30).
     """
+    # At most 30 bits of code: enough for locality, and code * n fits in 64 bits.
+    points = points[:30]
     d, n = points.shape
     if n == 0:
         return np.zeros(0, dtype=np.intp)
@@ -354,6 +366,7 @@ def classify(
     own_squared_residuals=None,
     settled=None,
     changed=None,
+    limit_blas=True,
 ):
     """Classification step: each correspondence to its most likely admitted cluster.
 
@@ -376,6 +389,9 @@ def classify(
         hence in motion, weight, noise scale and gate). Rows that stayed, next to none
         but unchanged clusters, face the very comparisons that kept them in place, so
         they stay again without being scored.
+    limit_blas : bool, default=True
+        Run BLAS on one thread meanwhile (see :func:`single_threaded_blas`); a caller
+        that classifies repeatedly sets the limit once itself.
 
     Returns
     -------
@@ -404,7 +420,7 @@ def classify(
             sorted_own, rotations, translations, scale, log_prior, own_squared_residuals
         )
     sorted_labels = np.full(n, -1, dtype=np.intp)
-    with single_threaded_blas():
+    with single_threaded_blas() if limit_blas else contextlib.nullcontext():
         _classify_blocks(
             blocks,
             (rotations, translations, scale, log_prior),
@@ -526,10 +542,11 @@ def _tiers(blocks, subs, parameters, reach, own, owned, floor):
         keep[sub_of[members], own[owned[members]]] = True
         return owned[members], keep
 
-    single = tier(np.ones(len(owned), dtype=bool))
-    if not weak.any():
-        return [single]
+    if not weak.any() or weak.all():
+        return [tier(np.ones(len(owned), dtype=bool))]
     tiers = [tier(~weak), tier(weak)]
+    # One tier for all rows keeps a cluster if either tier does.
+    single = (owned, tiers[0][1] | tiers[1][1])
 
     def cells(rows, keep):
         return np.bincount(rows // blocks.sub_rows, minlength=n_subs) @ keep.sum(axis=1)

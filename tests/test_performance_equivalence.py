@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 from sklearn.cluster import KMeans
 
 import mmreg._likelihood as likelihood
+import mmreg.estimators._em as em
 from mmreg._gate import ClusterGate
 from mmreg._geometry import fit_rigid, fit_rigid_grouped, fit_rigid_rows, group_sums
 from mmreg.datasets import make_scene
@@ -147,6 +148,37 @@ def test_final_models_are_those_of_the_final_clusters(block_sizes, max_iter):
         assert_array_equal(got, expected)
     sizes = np.bincount(result.labels[result.labels >= 0])
     assert np.all(np.diff(sizes) <= 0)
+
+
+def test_refitting_changed_clusters_only_equals_a_full_fit(monkeypatch):
+    # After the first M-step, only the clusters whose members changed are refitted; the
+    # others keep their models, which must be those a full fit gives, bit for bit.
+    refit = em._refit
+    checked = []
+
+    def compare(fitted, a_rows, b_rows, labels, changed, sigma_floor):
+        out = refit(fitted, a_rows, b_rows, labels, changed, sigma_floor)
+        full = em._fit_clusters(a_rows, b_rows, labels, len(changed), sigma_floor)
+        for name in ("rotations", "translations", "sigmas", "weights", "counts", "centroids"):
+            assert_array_equal(getattr(out, name), getattr(full, name))
+        clustered = labels >= 0
+        assert_array_equal(out.squared[clustered], full.squared[clustered])
+        assert_array_equal(out.spread[clustered], full.spread[clustered])
+        checked.append(changed.mean())
+        return out
+
+    monkeypatch.setattr(em, "_refit", compare)
+    for seed in range(3):
+        scene = make_scene(
+            n_objects=4, n_points=1200, noise=0.02, outlier_fraction=0.05, random_state=seed
+        )
+        init = KMeans(n_clusters=30, n_init=1, random_state=seed).fit_predict(scene.a)
+        for tau, min_cluster_size in [(1.5, 4), (0.5, 30), (None, 4)]:
+            em.multi_model_em(
+                scene.a + 100.0 * seed, scene.b, init, tau=tau, min_cluster_size=min_cluster_size
+            )
+    # Some refits left clusters alone.
+    assert checked and min(checked) < 1
 
 
 # --- the classification step against a dense reference -----------------------------------

@@ -10,7 +10,7 @@ import numpy as np
 
 from mmreg._gate import ClusterGate
 from mmreg._geometry import fit_rigid_rows
-from mmreg._likelihood import CorrespondenceBlocks, classify
+from mmreg._likelihood import CorrespondenceBlocks, classify, single_threaded_blas
 from mmreg._validation import compact_labels
 
 __all__ = ["EMResult", "default_sigma_floor", "multi_model_em"]
@@ -62,21 +62,20 @@ def fit_cluster_models(a, b, labels, n_clusters, sigma_floor):
     """Pose, weight and noise scale of every cluster (Algorithm 1, lines 3-6)."""
     a_rows = np.ascontiguousarray(np.asarray(a, dtype=float).T)
     b_rows = np.ascontiguousarray(np.asarray(b, dtype=float).T)
-    return _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor)[0]
+    return _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor).models
 
 
-def _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor):
+def _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor, n_total=None):
     """:func:`fit_cluster_models` on ``(d, n)`` coordinate rows.
 
-    Returns the five arrays of :func:`fit_cluster_models`, the
-    :class:`~mmreg._geometry.GroupedFit` with the per-point by-products and each point's
-    squared residual under its cluster's motion (over all ``n`` points; those of
-    unclustered points are meaningless).
+    Returns a :class:`_Fitted`; its per-point arrays cover all ``n`` points (those of
+    unclustered points are meaningless). ``n_total`` (default ``n``) divides the counts
+    into weights, for a fit of a subset of the points.
     """
-    n_total = len(labels)
+    n_total = len(labels) if n_total is None else n_total
     # Unclustered points form an extra group, so no subset of the points is ever copied;
     # the per-group sums of the real clusters are unchanged by it.
-    if n_total and labels.min() < 0:
+    if len(labels) and labels.min() < 0:
         labels = np.where(labels < 0, n_clusters, labels)
         n_groups = n_clusters + 1
     else:
@@ -100,14 +99,69 @@ def _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor):
         sigmas = np.sqrt(scatter / (d * (counts - 1)))
     sigmas[counts < 2] = sigma_floor
     sigmas = np.maximum(sigmas, sigma_floor)
-    models = (
+    return _Fitted(
         fit.rotations[:n_clusters],
         fit.translations[:n_clusters],
         sigmas,
         weights,
         counts,
+        fit.centroids[:n_clusters],
+        squared,
+        np.sqrt(np.einsum("ij,ij->j", fit.centred, fit.centred)),
     )
-    return models, fit, squared
+
+
+@dataclass
+class _Fitted:
+    """The models of the clusters, and what the E-step needs of each point."""
+
+    rotations: np.ndarray
+    translations: np.ndarray
+    sigmas: np.ndarray
+    weights: np.ndarray
+    counts: np.ndarray
+    centroids: np.ndarray
+    squared: np.ndarray
+    """Each point's squared residual under its cluster's motion."""
+    spread: np.ndarray
+    """Each point's distance to its cluster's centroid."""
+
+    @property
+    def models(self):
+        return self.rotations, self.translations, self.sigmas, self.weights, self.counts
+
+    def renumbered(self, present):
+        """The models of the clusters ``present`` (a boolean mask), in order."""
+        per_cluster = (self.rotations, self.translations, self.sigmas, self.weights)
+        per_cluster += (self.counts, self.centroids)
+        return _Fitted(*(x[present] for x in per_cluster), self.squared, self.spread)
+
+
+def _refit(fitted, a_rows, b_rows, labels, changed, sigma_floor):
+    """The models after an E-step that changed the members of the clusters ``changed``.
+
+    ``fitted`` holds the models from before the E-step, renumbered like ``labels``. A
+    cluster with the same members (in the same order) would be refitted to the very same
+    model, bit for bit; only the changed clusters are, on their own points.
+    """
+    redo = np.flatnonzero(changed)
+    position = np.full(len(changed) + 1, -1, dtype=np.intp)
+    position[redo] = np.arange(len(redo))
+    points = np.flatnonzero(position[labels] >= 0)
+    part = _fit_clusters(
+        np.take(a_rows, points, axis=1),
+        np.take(b_rows, points, axis=1),
+        position[labels[points]],
+        len(redo),
+        sigma_floor,
+        n_total=len(labels),
+    )
+    out = _Fitted(*(np.array(x) for x in vars(fitted).values()))
+    for name in ("rotations", "translations", "sigmas", "weights", "counts", "centroids"):
+        getattr(out, name)[redo] = getattr(part, name)
+    out.squared[points] = part.squared
+    out.spread[points] = part.spread
+    return out
 
 
 def _compact(labels, n_clusters):
@@ -157,65 +211,70 @@ def multi_model_em(
     blocks = CorrespondenceBlocks(a, b) if max_iter > 0 and n_clusters > 0 else None
     n_iter = 0
     converged = False
-    models = None
+    fitted = None
     # What the last E-step left alone: its points face the same comparisons again unless
-    # a cluster near them changed, so the next E-step can skip them.
+    # a cluster near them changed, so the next E-step can skip them, and the M-step need
+    # refit only the changed clusters.
     settled = changed = None
-    for _ in range(max_iter):
-        if n_clusters == 0:
-            # Nothing left to fit or to assign to: the labels cannot change any more.
-            converged = True
-            break
-        n_iter += 1
-        # Lines 2-7: pose, weight pi_j = |H_j| / n and sigma_j of every cluster.
-        models, fit, own_sq = _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor)
-        rotations, translations, sigmas, weights, counts = models
-        # Lines 10-13: clusters below m_min leave H before the M-step; their points keep
-        # no "own" cluster and must be won by another one (or become outliers).
-        kept = np.flatnonzero(counts >= min_cluster_size)
-        # position[-1] == -1 maps the unclustered points too.
-        position = np.full(n_clusters + 1, -1, dtype=np.intp)
-        position[kept] = np.arange(len(kept))
-        own = position[labels]
-        # Lines 8-9 and 15-18: E-step and classification M-step, gated by d_cluster <= tau
-        # measured against the clusters as they were when the poses were fitted.
-        gate = ClusterGate(
-            a,
-            own,
-            len(kept),
-            tau,
-            centers=fit.centroids[kept],
-            spread=np.sqrt(np.einsum("ij,ij->j", fit.centred, fit.centred)),
-        )
-        new = classify(
-            a,
-            b,
-            rotations[kept],
-            translations[kept],
-            sigmas[kept],
-            weights[kept],
-            gate,
-            own,
-            blocks=blocks,
-            own_squared_residuals=own_sq,
-            settled=settled,
-            changed=None if changed is None else changed[kept],
-        )
-        new_in_old_ids = np.append(kept, -1)[new]
-        settled = new_in_old_ids == labels
-        if settled.all():
-            converged = True
-            break
-        # A cluster changes when a point leaves or joins it; the last slot takes -1.
-        touched = np.zeros(n_clusters + 1, dtype=bool)
-        touched[labels[~settled]] = True
-        touched[new_in_old_ids[~settled]] = True
-        labels, n_clusters, present = _compact(new_in_old_ids, n_clusters)
-        changed = touched[:-1][present]
-        models = None
+    # The products are small: one BLAS thread is faster (see single_threaded_blas).
+    with single_threaded_blas():
+        for _ in range(max_iter):
+            if n_clusters == 0:
+                # Nothing left to fit or to assign to: the labels cannot change any more.
+                converged = True
+                break
+            n_iter += 1
+            # Lines 2-7: pose, weight pi_j = |H_j| / n and sigma_j of every cluster.
+            if fitted is None:
+                fitted = _fit_clusters(a_rows, b_rows, labels, n_clusters, sigma_floor)
+            else:
+                fitted = _refit(fitted, a_rows, b_rows, labels, changed, sigma_floor)
+            rotations, translations, sigmas, weights, counts = fitted.models
+            # Lines 10-13: clusters below m_min leave H before the M-step; their points keep
+            # no "own" cluster and must be won by another one (or become outliers).
+            kept = np.flatnonzero(counts >= min_cluster_size)
+            # position[-1] == -1 maps the unclustered points too.
+            position = np.full(n_clusters + 1, -1, dtype=np.intp)
+            position[kept] = np.arange(len(kept))
+            own = position[labels]
+            # Lines 8-9 and 15-18: E-step and classification M-step, gated by d_cluster <= tau
+            # measured against the clusters as they were when the poses were fitted.
+            gate = ClusterGate(
+                a, own, len(kept), tau, centers=fitted.centroids[kept], spread=fitted.spread
+            )
+            new = classify(
+                a,
+                b,
+                rotations[kept],
+                translations[kept],
+                sigmas[kept],
+                weights[kept],
+                gate,
+                own,
+                blocks=blocks,
+                own_squared_residuals=fitted.squared,
+                settled=settled,
+                changed=None if changed is None else changed[kept],
+                limit_blas=False,
+            )
+            new_in_old_ids = np.append(kept, -1)[new]
+            settled = new_in_old_ids == labels
+            if settled.all():
+                converged = True
+                break
+            # A cluster changes when a point leaves or joins it; the last slot takes -1.
+            touched = np.zeros(n_clusters + 1, dtype=bool)
+            touched[labels[~settled]] = True
+            touched[new_in_old_ids[~settled]] = True
+            labels, n_clusters, present = _compact(new_in_old_ids, n_clusters)
+            changed = touched[:-1][present]
+            fitted = fitted.renumbered(present)
+        else:
+            # max_iter reached: the last E-step's clusters were never fitted.
+            fitted = None
     rank = _size_rank(labels, n_clusters)
     labels = rank[labels]
-    if models is None:
+    if fitted is None:
         rotations, translations, sigmas, weights, _ = fit_cluster_models(
             a, b, labels, n_clusters, sigma_floor
         )
@@ -223,5 +282,5 @@ def multi_model_em(
         # The last M-step fitted exactly these clusters: renumbering them changes neither
         # the points nor their order within a cluster, so a refit would give the same.
         order = np.argsort(rank[:n_clusters])
-        rotations, translations, sigmas, weights = (x[order] for x in models[:4])
+        rotations, translations, sigmas, weights = (x[order] for x in fitted.models[:4])
     return EMResult(labels, rotations, translations, sigmas, weights, n_iter, converged)
