@@ -533,9 +533,13 @@ def _tiers(blocks, subs, parameters, reach, own, owned, floor):
     weak = scores < mean[sub_of] - _WEAK_SCORE
     bounds = blocks.column_bounds(subs, *parameters)
 
+    # Rows are sorted, so each sub-block's rows are a run of `owned`.
+    nonempty = np.flatnonzero(count)
+    firsts = np.searchsorted(owned, nonempty * blocks.sub_rows)
+
     def tier(members):
         worst = np.full(n_subs, np.inf)
-        np.minimum.at(worst, sub_of[members], scores[members])
+        worst[nonempty] = np.minimum.reduceat(np.where(members, scores, np.inf), firsts)
         keep = reach & (bounds >= worst[:, None])
         # A point's own cluster is always in reach and always scored; make sure rounding
         # cannot drop it.

@@ -36,7 +36,14 @@ def default_sigma_floor(b):
     ratios of such sigmas would decide assignments at random. The floor makes clusters of
     exact fits equally sharp, so the weights ``pi_j`` decide, as Theorem 1 assumes.
     """
-    spread = float(np.sqrt(np.mean(np.sum((b - b.mean(axis=0)) ** 2, axis=1)))) if len(b) else 0.0
+    if len(b) == 0:
+        return 1e-6
+    centred = b - b.mean(axis=0)
+    # Column by column: the same sums as summing each short row, several times faster.
+    squared = centred[:, 0] ** 2
+    for column in range(1, centred.shape[1]):
+        squared += centred[:, column] ** 2
+    spread = float(np.sqrt(np.mean(squared)))
     return 1e-6 * spread if spread > 0 else 1e-6
 
 
@@ -164,6 +171,16 @@ def _refit(fitted, a_rows, b_rows, labels, changed, sigma_floor):
     return out
 
 
+def _compact_initial(labels):
+    """:func:`~mmreg._validation.compact_labels`, without sorting when labels are small."""
+    labels = np.asarray(labels)
+    if labels.dtype.kind not in "iu" or not len(labels) or labels.max() > 4 * len(labels):
+        return compact_labels(labels)
+    labels = np.maximum(labels.astype(np.intp), -1)
+    compact, n_clusters, _ = _compact(labels, int(labels.max()) + 1)
+    return compact, n_clusters
+
+
 def _compact(labels, n_clusters):
     """:func:`~mmreg._validation.compact_labels` for labels already in ``-1..K-1``.
 
@@ -204,7 +221,7 @@ def multi_model_em(
     """
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
-    labels, n_clusters = compact_labels(init_labels)
+    labels, n_clusters = _compact_initial(init_labels)
     a_rows = np.ascontiguousarray(np.asarray(a, dtype=float).T)
     b_rows = np.ascontiguousarray(np.asarray(b, dtype=float).T)
     # The a-points never move: their blocks and residual features serve every E-step.
