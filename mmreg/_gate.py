@@ -119,7 +119,7 @@ class ClusterGate:
         return (reach >= 0) & (sq < reach**2 + slack)
 
     def admits(self, query, clusters):
-        """Exact gate of each query point against its own cluster; boolean (m,).
+        """Exact gate of each query point against the cluster given for it; boolean (m,).
 
         Parameters
         ----------
