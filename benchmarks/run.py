@@ -89,7 +89,11 @@ def voxel_init(X, n_clusters):
 
     def cells(size):
         keys = np.floor((points - low) / size).astype(np.int64)
-        return np.unique(keys, axis=0, return_inverse=True)[1].ravel()
+        shape = keys.max(axis=0) + 1
+        if np.prod(shape.astype(float)) >= 2.0**62:
+            return np.unique(keys, axis=0, return_inverse=True)[1].ravel()
+        # One integer per cell (row-major over the occupied box), then its rank.
+        return np.unique(np.ravel_multi_index(keys.T, shape), return_inverse=True)[1]
 
     small, large = 1e-6, float(np.ptp(points, axis=0).max()) or 1.0
     for _ in range(40):
