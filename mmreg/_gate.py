@@ -104,12 +104,6 @@ class ClusterGate:
         slack = 1e-9 * (1.0 + reach**2)
         return (reach >= 0) & (sq < reach**2 + slack)
 
-    def maybe_within(self, query):
-        """Boolean ``(m, K)``: False where the bounding ball proves the gate closed."""
-        if self.radius is None:
-            return np.ones((len(query), self.n_clusters), dtype=bool)
-        return self._ball_open(query[:, None, :], np.arange(self.n_clusters)[None, :])
-
     def _ball_open(self, query, clusters):
         """False where the bounding ball proves the gate of ``clusters`` closed."""
         diff = query - self._centers[clusters]
