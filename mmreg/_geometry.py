@@ -15,42 +15,10 @@ __all__ = [
     "fit_rigid",
     "fit_rigid_grouped",
     "fit_rigid_rows",
-    "group_sums",
     "residuals",
     "rotation_angle",
     "squared_residuals_all",
 ]
-
-
-def group_sums(values, labels, n_groups):
-    """Sum the rows of ``values`` per group.
-
-    Parameters
-    ----------
-    values : ndarray of shape (n, k)
-        Rows to add up.
-    labels : ndarray of shape (n,)
-        Group of each row in ``0..n_groups-1``; rows with a negative label are ignored.
-    n_groups : int
-        Number of groups.
-
-    Returns
-    -------
-    sums : ndarray of shape (n_groups, k)
-    """
-    values = np.asarray(values, dtype=float)
-    labels = np.asarray(labels)
-    keep = labels >= 0
-    if not keep.all():
-        values, labels = values[keep], labels[keep]
-    sums = np.empty((n_groups, values.shape[1]))
-    # One weighted bincount per column: one pass each, adding each group's rows in their
-    # order (the same order, hence the same rounding, as a one-hot sparse product).
-    for column in range(values.shape[1]):
-        sums[:, column] = np.bincount(labels, weights=values[:, column], minlength=n_groups)[
-            :n_groups
-        ]
-    return sums
 
 
 def fit_rigid_grouped(a, b, labels, n_groups):

@@ -22,7 +22,7 @@ from sklearn.cluster import KMeans
 import mmreg._likelihood as likelihood
 import mmreg.estimators._em as em
 from mmreg._gate import ClusterGate
-from mmreg._geometry import fit_rigid, fit_rigid_grouped, fit_rigid_rows, group_sums
+from mmreg._geometry import fit_rigid, fit_rigid_grouped, fit_rigid_rows
 from mmreg.datasets import make_scene
 from mmreg.estimators import MultiModelRegistration, multi_model_em
 from mmreg.estimators._em import default_sigma_floor, fit_cluster_models
@@ -284,11 +284,3 @@ def test_fit_rigid_rows_matches_one_group_at_a_time():
     expected = b[keep] - np.einsum("nij,nj->ni", rotations[labels[keep]], a[keep])
     expected -= translations[labels[keep]]
     np.testing.assert_allclose(fit.residuals.T, expected, atol=1e-12)
-
-
-def test_group_sums_matches_a_loop():
-    rng = np.random.default_rng(1)
-    values = rng.normal(size=(200, 4))
-    labels = rng.integers(-1, 5, 200)
-    expected = np.stack([values[labels == j].sum(axis=0) for j in range(6)])
-    np.testing.assert_allclose(group_sums(values, labels, 6), expected, atol=1e-12)
