@@ -2,12 +2,11 @@
 
 from scipy.spatial import cKDTree
 from sklearn.base import _fit_context
-from sklearn.utils._param_validation import HasMethods, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
-from mmreg.init._resolve import INIT_SHORTCUTS, initial_labels
+from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["NaiveRegistration"]
 
@@ -92,7 +91,7 @@ class NaiveRegistration(BaseRegistration):
 
     _parameter_constraints: dict = {
         **BaseRegistration._parameter_constraints,
-        "init": [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"],
+        "init": INIT_CONSTRAINT,
         "random_state": ["random_state"],
     }
 

@@ -11,7 +11,7 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.base import _fit_context
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg._geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
@@ -24,7 +24,7 @@ from mmreg.baselines._hypotheses import (
 )
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import _relabel_by_size
-from mmreg.init._resolve import INIT_SHORTCUTS, initial_labels
+from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["TLinkage", "preference", "t_linkage", "tanimoto_linkage"]
 
@@ -362,7 +362,7 @@ class TLinkage(BaseRegistration):
     _parameter_constraints: dict = {
         **BaseRegistration._parameter_constraints,
         "tau_t": [Interval(Real, 0, None, closed="neither")],
-        "init": [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"],
+        "init": INIT_CONSTRAINT,
         "n_hypotheses": [Interval(Integral, 0, None, closed="left")],
         "min_cluster_size": [Interval(Integral, 1, None, closed="left")],
         "random_state": ["random_state"],

@@ -3,11 +3,11 @@
 from numbers import Integral, Real
 
 from sklearn.base import _fit_context
-from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+from sklearn.utils._param_validation import Interval
 
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
-from mmreg.init._resolve import INIT_SHORTCUTS, initial_labels
+from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["MultiModelRegistration"]
 
@@ -131,7 +131,7 @@ class MultiModelRegistration(BaseRegistration):
         "tau": [Interval(Real, 0, None, closed="neither"), None],
         "min_cluster_size": [Interval(Integral, 1, None, closed="left")],
         "max_iter": [Interval(Integral, 0, None, closed="left")],
-        "init": [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"],
+        "init": INIT_CONSTRAINT,
         "random_state": ["random_state"],
     }
 

@@ -2,11 +2,12 @@
 
 import numpy as np
 from sklearn.base import clone
+from sklearn.utils._param_validation import HasMethods, StrOptions
 
 from mmreg._validation import check_labels
 from mmreg.init._base import BaseInitializer
 
-__all__ = ["INIT_SHORTCUTS", "initial_labels"]
+__all__ = ["INIT_CONSTRAINT", "INIT_SHORTCUTS", "initial_labels"]
 
 
 def _shortcuts():
@@ -20,6 +21,9 @@ def _shortcuts():
 
 
 INIT_SHORTCUTS = ("euclidean", "dbscan")
+
+# The `_parameter_constraints` entry of every estimator that takes an `init`.
+INIT_CONSTRAINT = [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"]
 
 
 def initial_labels(init, X, *, random_state=None):
