@@ -32,7 +32,8 @@ from scipy.spatial.transform import Rotation
 from sklearn.utils import Bunch
 
 from mmreg._neighbors import radius_graph
-from mmreg.datasets import SHAPES, _unit_shape
+from mmreg.datasets import SHAPES
+from mmreg.datasets._scene import _unit_shape
 
 try:
     from hypothesis import strategies as st

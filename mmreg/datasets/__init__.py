@@ -1,0 +1,9 @@
+"""Scenes with known objects, motions and outliers, and loaders for real data sets.
+
+One module per family of scenes; every generator returns a :class:`sklearn.utils.Bunch`
+and is seeded by ``random_state``.
+"""
+
+from mmreg.datasets._scene import SHAPES, make_scene
+
+__all__ = ["SHAPES", "make_scene"]
