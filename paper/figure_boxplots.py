@@ -41,8 +41,16 @@ def draw(results, experiment):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "out")
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path(__file__).parent / "out",
+        help="folder holding table1.csv (from table1.py); the PNGs are written there too",
+    )
     args = parser.parse_args(argv)
     results = pd.read_csv(args.out / "table1.csv")
     for experiment in sorted(results["experiment"].unique()):

@@ -31,6 +31,8 @@ def reference(points, eps, min_samples):
     _, components = connected_components((dist <= eps) & core & core[:, None], directed=False)
     labels = np.where(core, components, -1)
     border = ~core & (dist[:, core] <= eps).any(axis=1)
+    if not border.any():  # also when there is no core point at all
+        return labels
     nearest_core = np.flatnonzero(core)[np.argmin(dist[np.ix_(border, core)], axis=1)]
     labels[border] = labels[nearest_core]
     return labels

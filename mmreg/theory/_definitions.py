@@ -418,10 +418,10 @@ def is_good_clustering(init_labels, true_labels, X, tau, alpha, m0, *, outliers=
     >>> X = np.hstack([a, a])                        # one object: a line of 12 points
     >>> truth = np.zeros(12, dtype=int)
     >>> init = np.repeat([0, 1], [8, 4])             # two tau-connected pieces, 8 and 4
-    >>> report = is_good_clustering(init, truth, X, tau=1.0, alpha=1.5, m0=4)
+    >>> report = is_good_clustering(init, truth, X, tau=1.5, alpha=1.5, m0=4)
     >>> bool(report), float(report.max_alpha)
     (True, 2.0)
-    >>> [c.name for c in is_good_clustering(init, truth, X, tau=1.0, alpha=2, m0=5).failures]
+    >>> [c.name for c in is_good_clustering(init, truth, X, tau=1.5, alpha=3, m0=5).failures]
     ['size', 'identifying']
     """
     a, _ = _correspondences(X)
