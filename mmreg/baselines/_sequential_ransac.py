@@ -9,7 +9,7 @@ from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg._geometry import fit_rigid, squared_residuals_all
-from mmreg.baselines._hypotheses import (
+from mmreg._hypotheses import (
     count_inliers,
     draw_minimal_samples,
     fit_minimal_samples,

@@ -15,13 +15,13 @@ from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg._geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
-from mmreg._likelihood import single_threaded_blas
-from mmreg._validation import compact_labels
-from mmreg.baselines._hypotheses import (
+from mmreg._hypotheses import (
     fit_minimal_samples,
     minimal_sample_size,
     nearest_model,
 )
+from mmreg._likelihood import single_threaded_blas
+from mmreg._validation import compact_labels
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import _relabel_by_size
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
@@ -43,8 +43,8 @@ def preference(distance, tau_t):
     Examples
     --------
     >>> from mmreg.baselines._t_linkage import preference
-    >>> preference([0.0, 0.2, 1.0, 1.01], tau_t=0.2).round(4)
-    array([1.    , 0.3679, 0.0067, 0.    ])
+    >>> preference([0.0, 0.2, 0.6, 1.4], tau_t=0.2).round(4)
+    array([1.    , 0.3679, 0.0498, 0.    ])
     """
     distance = np.asarray(distance, dtype=float)
     return np.where(distance <= CUTOFF * tau_t, np.exp(-distance / tau_t), 0.0)
@@ -347,7 +347,7 @@ class TLinkage(BaseRegistration):
     >>> rng = np.random.default_rng(0)
     >>> a = np.vstack([rng.uniform(0, 1, (60, 3)), rng.uniform(5, 6, (40, 3))])
     >>> b = a.copy()
-    >>> b[:60] += [1.0, 0.0, 0.0]                 # the first object moves, the second not
+    >>> b[:60] += [3.0, 0.0, 0.0]                 # the first object moves, the second not
     >>> X = np.hstack([a, b])
     >>> init = np.repeat([0, 1, 2, 3], [30, 30, 20, 20])   # two pieces per object
     >>> est = TLinkage(init=init).fit(X)
