@@ -2,8 +2,9 @@
 
 Each ``test_counterexample_*`` builds a small scene by hand, shows with the checkers which
 condition of Definition 1 or 2 it violates (or how weakly it meets it), and asserts that
-Algorithm 1 then does *not* return every object as one cluster. Where it helps, a
-contrast case next to it keeps everything equal but the broken condition and recovers.
+Algorithm 1 (``variant="paper"``) then does *not* return every object as one cluster.
+Where it helps, a contrast case next to it keeps everything equal but the broken
+condition and recovers.
 
 The scenes are flat 10 x 10 grids of spacing 0.1 (100 correspondences) with
 ``tau = 0.15``, so the pieces below are tau-connected through the grid.
@@ -38,7 +39,7 @@ def fit(X, init, min_cluster_size, tau=TAU):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return MultiModelRegistration(
-            init=init, tau=tau, min_cluster_size=min_cluster_size, max_iter=200
+            init=init, tau=tau, min_cluster_size=min_cluster_size, max_iter=200, variant="paper"
         ).fit(X)
 
 
@@ -159,7 +160,8 @@ def test_counterexample_objects_closer_than_tau_merge():
 def test_theorem_1_at_gaps_of_exactly_tau():
     # Not a counter-example any more: eq. (7) gates with d_cluster < tau, Definitions 1-2
     # allow gaps <= tau, so with a strict gate pieces exactly tau apart never met. The
-    # gate admits d_cluster <= tau. A grid of spacing exactly 1 with tau = 1:
+    # gate admits d_cluster <= tau. A grid of spacing exactly 1 with tau = 1 (integer
+    # coordinates: the gaps equal tau exactly, in floating point too, on any machine):
     a = grid(step=1.0)
     X = np.hstack([a, move(a)])
     truth = np.zeros(100, dtype=int)

@@ -1,0 +1,376 @@
+"""The steps the robust estimator adds around Algorithm 1, each a pure function on arrays.
+
+* :func:`trimmed_fit`: the M-step on each cluster's inliers only (a residual test against
+  a robust, median-based noise scale), so wrong correspondences do not bend the motions.
+* :func:`merge_adjacent`: adjacent clusters whose motions explain each other's
+  correspondences within their own noise are merged, by a likelihood-ratio test with the
+  BIC's price for a rigid motion; many rounds per iteration, so a large over-segmented
+  surface merges at once instead of growing by ``tau`` per iteration.
+* :func:`reject_outliers`: the uniform outlier component: a correspondence whose
+  cluster explains it less well than a uniform density over the scene is labelled -1.
+* :func:`propose_clusters`: RANSAC hypotheses drawn inside tau-connected groups of
+  unexplained correspondences; a hypothesis becomes a cluster only if it pays for itself
+  under the same BIC, so scattered wrong correspondences never form one.
+* :func:`drop_small_clusters`: clusters below ``min_cluster_size`` are dissolved.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.stats import chi2
+
+from mmreg._connectivity import tau_components
+from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
+from mmreg._moments import Moments, group_moments
+
+__all__ = [
+    "ClusterModels",
+    "adjacent_pairs",
+    "drop_small_clusters",
+    "fit_clusters",
+    "log_uniform_density",
+    "merge_adjacent",
+    "propose_clusters",
+    "reject_outliers",
+    "squared_residuals",
+    "trimmed_fit",
+]
+
+_LOG_2PI = np.log(2.0 * np.pi)
+
+
+def motion_parameters(d):
+    """Free parameters of a rigid motion in ``d`` dimensions (6 in 3-D)."""
+    return d * (d + 1) // 2
+
+
+@dataclass
+class ClusterModels:
+    """Motions, noise scales and statistics of the clusters ``0..K-1``."""
+
+    rotations: np.ndarray
+    translations: np.ndarray
+    sigmas: np.ndarray
+    moments: Moments
+    squared_error: np.ndarray
+    """Sum of squared residuals of each cluster's members under its own motion."""
+
+    @property
+    def counts(self):
+        return self.moments.count
+
+    def take(self, index):
+        return ClusterModels(
+            self.rotations[index],
+            self.translations[index],
+            self.sigmas[index],
+            self.moments.take(index),
+            self.squared_error[index],
+        )
+
+
+def _models_from_moments(moments, d, sigma_floor):
+    rotations, translations = moments.fit()
+    error = moments.squared_error(rotations, translations)
+    # Unbiased: the motion's parameters were fitted to the same residuals.
+    dof = d * moments.count - motion_parameters(d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigmas = np.sqrt(error / dof)
+    sigmas[~(dof > 0) | ~np.isfinite(sigmas)] = sigma_floor
+    sigmas = np.maximum(sigmas, sigma_floor)
+    return ClusterModels(rotations, translations, sigmas, moments, error)
+
+
+def fit_clusters(a, b, labels, n_clusters, sigma_floor):
+    """Motion (Horn), unbiased noise scale and moments of every cluster."""
+    moments = group_moments(a, b, labels, n_clusters)
+    return _models_from_moments(moments, a.shape[1], sigma_floor)
+
+
+def squared_residuals(a, b, labels, rotations, translations):
+    """``||b - R_j a - t_j||^2`` under each correspondence's own cluster ``j`` (inf for -1)."""
+    out = np.full(len(a), np.inf)
+    rows = np.flatnonzero(labels >= 0)
+    if len(rows):
+        j = labels[rows]
+        moved = np.einsum("nij,nj->ni", rotations[j], a[rows]) + translations[j]
+        diff = b[rows] - moved
+        out[rows] = np.einsum("ij,ij->i", diff, diff)
+    return out
+
+
+def _group_medians(values, labels, n_groups):
+    """Median of ``values`` within each group (NaN for empty groups)."""
+    order = np.lexsort((values, labels))
+    sorted_values = values[order]
+    counts = np.bincount(labels, minlength=n_groups)[:n_groups]
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    medians = np.full(n_groups, np.nan)
+    full = counts > 0
+    low = starts[full] + (counts[full] - 1) // 2
+    high = starts[full] + counts[full] // 2
+    medians[full] = 0.5 * (sorted_values[low] + sorted_values[high])
+    return medians
+
+
+def trimmed_fit(a, b, labels, n_clusters, sigma_floor, *, confidence=0.999, rounds=2):
+    """M-step on inliers: fit, drop residuals beyond a robust scale, refit.
+
+    Each round fits every cluster's motion on its current inliers, estimates its noise
+    scale robustly (``sigma^2 = median(r^2) / median(chi2_d)``, valid with up to half of
+    the cluster wrong) and keeps as inliers the members whose squared residual is within
+    the ``confidence`` quantile of ``sigma^2 chi2_d``.
+
+    Returns
+    -------
+    inliers : ndarray of shape (n,)
+        ``labels`` with the trimmed correspondences set to -1.
+    models : ClusterModels
+        Fitted on the inliers.
+    """
+    d = a.shape[1]
+    limit = chi2.ppf(confidence, d)
+    median_chi2 = chi2.ppf(0.5, d)
+    member = labels >= 0
+    inliers = labels
+    for _ in range(rounds):
+        models = fit_clusters(a, b, inliers, n_clusters, sigma_floor)
+        sq = squared_residuals(a, b, labels, models.rotations, models.translations)
+        scale2 = _group_medians(sq[member], labels[member], n_clusters) / median_chi2
+        scale2 = np.maximum(np.nan_to_num(scale2, nan=0.0), sigma_floor**2)
+        keep = member & (sq <= limit * np.append(scale2, np.inf)[labels])
+        inliers = np.where(keep, labels, -1)
+    return inliers, fit_clusters(a, b, inliers, n_clusters, sigma_floor)
+
+
+def log_uniform_density(b):
+    """``-log V`` of a uniform density over the bounding box of the b-points.
+
+    A wrong correspondence points anywhere in the scene. Degenerate extents (a planar
+    scene) are floored at ``1e-3`` of the largest one, so the volume is never zero.
+    """
+    extent = np.ptp(b, axis=0) if len(b) else np.ones(1)
+    largest = float(extent.max()) if extent.size else 0.0
+    if largest <= 0:
+        return 0.0
+    return -float(np.sum(np.log(np.maximum(extent, 1e-3 * largest))))
+
+
+def reject_outliers(a, b, labels, rotations, translations, sigmas, weights, log_outlier):
+    """Label -1 the correspondences the uniform outlier component explains better.
+
+    Correspondence ``i`` of cluster ``j`` stays iff
+    ``pi_j N(b_i - R_j a_i - t_j; 0, sigma_j^2 I) >= pi_0 / V`` with ``log_outlier`` the
+    right-hand side's logarithm: a residual test at about 5-7 sigma, farther the more
+    weight the cluster has and the larger the scene.
+    """
+    d = a.shape[1]
+    sq = squared_residuals(a, b, labels, rotations, translations)
+    rows = np.flatnonzero(labels >= 0)
+    j = labels[rows]
+    sigma = sigmas[j]
+    with np.errstate(divide="ignore"):
+        score = np.log(weights[j]) - d * np.log(sigma) - 0.5 * d * _LOG_2PI
+    score -= 0.5 * sq[rows] / sigma**2
+    out = labels.copy()
+    out[rows[score < log_outlier]] = -1
+    return out
+
+
+def adjacent_pairs(points, labels, n_clusters, tau):
+    """Pairs of clusters ``(i, j)``, ``i < j``, with points in one cell of side ``tau/sqrt(d)``.
+
+    Two points in one such cell are at most ``tau`` apart, so every pair returned is
+    within the gate of eq. (7); clusters that touch share cells. ``tau=None`` (no gate)
+    pairs every two clusters.
+    """
+    if n_clusters < 2:
+        return np.empty((0, 2), dtype=np.intp)
+    if tau is None:
+        i, j = np.triu_indices(n_clusters, k=1)
+        return np.column_stack([i, j])
+    keep = labels >= 0
+    points, labels = points[keep], labels[keep]
+    d = points.shape[1]
+    cells = np.floor((points - points.min(axis=0)) / (tau / np.sqrt(d))).astype(np.int64)
+    dims = cells.max(axis=0) + 1
+    if np.prod(dims.astype(float)) * n_clusters < 2.0**62:
+        key = np.ravel_multi_index(tuple(cells.T), tuple(dims)) * n_clusters + labels
+        key = np.unique(key)
+        cell_of, label_of = np.divmod(key, n_clusters)
+    else:
+        rows = np.unique(np.column_stack([cells, labels]), axis=0)
+        _, cell_of = np.unique(rows[:, :d], axis=0, return_inverse=True)
+        cell_of, label_of = cell_of.ravel(), rows[:, d]
+    pairs = []
+    offset = 1
+    while offset < len(cell_of):
+        same = np.flatnonzero(cell_of[offset:] == cell_of[:-offset])
+        if not len(same):
+            break
+        pairs.append(np.column_stack([label_of[same], label_of[same + offset]]))
+        offset += 1
+    if not pairs:
+        return np.empty((0, 2), dtype=np.intp)
+    pairs = np.sort(np.vstack(pairs), axis=1)
+    return np.unique(pairs, axis=0).astype(np.intp)
+
+
+def _merge_ratio(models, pairs, d):
+    """Likelihood-ratio statistic of "one motion" over its BIC price, for each pair.
+
+    The joint motion is fitted with each cluster weighted by ``1 / sigma^2`` (each keeps
+    its own noise scale: a far, noisier part of the background must not look like another
+    motion). The statistic is ``sum_k (RSS_k(joint) - RSS_k(own)) / sigma_k^2``, which is
+    ``chi2`` with ``d (d + 1) / 2`` degrees of freedom when the motions agree; the BIC
+    price of the second motion is ``d (d + 1) / 2 * log(n_i + n_j)``. Below 1: merge.
+    """
+    i, j = pairs[:, 0], pairs[:, 1]
+    inv_i = 1.0 / models.sigmas[i] ** 2
+    inv_j = 1.0 / models.sigmas[j] ** 2
+    mi, mj = models.moments.take(i), models.moments.take(j)
+    rotations, translations = (mi.scaled(inv_i) + mj.scaled(inv_j)).fit()
+    excess = (mi.squared_error(rotations, translations) - models.squared_error[i]) * inv_i
+    excess += (mj.squared_error(rotations, translations) - models.squared_error[j]) * inv_j
+    price = motion_parameters(d) * np.log(mi.count + mj.count)
+    return np.maximum(excess, 0.0) / price
+
+
+def merge_adjacent(models, pairs, d, sigma_floor):
+    """Merge adjacent clusters whose motions agree within their noise, round by round.
+
+    Each round computes the statistic of :func:`_merge_ratio` for every adjacent pair and
+    merges the pairs below 1 that are each other's best partner (so a cluster joins at
+    most one other per round, and the strongest agreements go first); the merged
+    clusters are refitted from their summed moments and the next round tests them again.
+
+    Returns
+    -------
+    root : ndarray of shape (K,)
+        The cluster each cluster was merged into (itself if none).
+    models : ClusterModels
+        Indexed like the old clusters; only the entries of roots are meaningful.
+    n_merges : int
+    """
+    k = len(models.sigmas)
+    parent = np.arange(k)
+    n_merges = 0
+    models = models.take(np.arange(k))  # a copy: entries are overwritten below
+    while len(pairs):
+        ratio = _merge_ratio(models, pairs, d)
+        good = ratio < 1.0
+        if not good.any():
+            break
+        pairs, ratio = pairs[good], ratio[good]
+        # Mutual best partners; ties to the first pair in order.
+        order = np.lexsort((np.arange(len(ratio)), ratio))
+        pairs, ratio = pairs[order], ratio[order]
+        first = np.full(k, len(ratio))
+        np.minimum.at(first, pairs[:, 0], np.arange(len(ratio)))
+        np.minimum.at(first, pairs[:, 1], np.arange(len(ratio)))
+        index = np.arange(len(ratio))
+        chosen = (first[pairs[:, 0]] == index) & (first[pairs[:, 1]] == index)
+        keep, gone = pairs[chosen, 0], pairs[chosen, 1]
+        merged = models.moments.take(keep) + models.moments.take(gone)
+        refit = _models_from_moments(merged, d, sigma_floor)
+        for name in ("rotations", "translations", "sigmas", "squared_error"):
+            getattr(models, name)[keep] = getattr(refit, name)
+        for name, value in vars(merged).items():
+            getattr(models.moments, name)[keep] = value
+        parent[gone] = keep
+        n_merges += len(keep)
+        remap = np.arange(k)
+        remap[gone] = keep
+        pairs = np.sort(remap[pairs], axis=1)
+        pairs = np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
+    root = parent
+    while True:
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            break
+        root = nxt
+    return root, models, n_merges
+
+
+def drop_small_clusters(labels, counts, min_cluster_size):
+    """Labels with the clusters below ``min_cluster_size`` dissolved (-1), renumbered."""
+    kept = counts >= min_cluster_size
+    position = np.full(len(counts) + 1, -1, dtype=np.intp)
+    position[:-1][kept] = np.arange(np.count_nonzero(kept))
+    return position[labels], np.flatnonzero(kept)
+
+
+def propose_clusters(
+    a,
+    b,
+    unexplained,
+    radius,
+    scale,
+    log_outlier,
+    n_total,
+    rng,
+    *,
+    min_cluster_size,
+    n_hypotheses=32,
+    confidence=0.999,
+):
+    """New clusters from groups of unexplained correspondences that share a motion.
+
+    The unexplained correspondences (labelled -1) are split into ``radius``-connected
+    groups of their a-points; in every group of at least ``min_cluster_size``, minimal
+    samples are drawn locally (a random seed and two of its nearest unexplained
+    neighbours) and the hypothesis with most inliers (residual within the ``confidence``
+    quantile of ``scale^2 chi2_d``) is refitted on them. It becomes a cluster only if its
+    inliers' log-likelihood under it beats that under the outlier density by more than
+    the BIC price of a motion and a noise scale: wrong correspondences that agree on no
+    motion never form one.
+
+    Returns
+    -------
+    groups : list of ndarray
+        The indices (into ``a``) of the members of each accepted new cluster.
+    """
+    d = a.shape[1]
+    size = minimal_sample_size(d)
+    rows = np.flatnonzero(unexplained)
+    if len(rows) < max(min_cluster_size, size + 1):
+        return []
+    _, component = tau_components(a[rows], radius)
+    counts = np.bincount(component)
+    limit = chi2.ppf(confidence, d) * scale**2
+    price = 0.5 * (motion_parameters(d) + 1) * np.log(n_total)
+    accepted = []
+    for c in np.flatnonzero(counts >= max(min_cluster_size, size + 1)):
+        members = rows[component == c]
+        pa, pb = a[members], b[members]
+        k_near = min(len(members), 9)
+        seeds = rng.randint(len(members), size=n_hypotheses)
+        # Local samples: a correspondence's nearest unexplained neighbours are the
+        # likeliest to share its motion (column 0 is the seed itself).
+        _, near = cKDTree(pa).query(pa[seeds], k=k_near)
+        near = near.reshape(n_hypotheses, k_near)
+        picks = np.take_along_axis(
+            near, 1 + rng.randint(k_near - 1, size=(n_hypotheses, size - 1)), axis=1
+        )
+        samples = np.column_stack([seeds, picks])
+        rotations, translations, valid = fit_minimal_samples(pa, pb, samples)
+        if not len(rotations):
+            continue
+        moved = np.einsum("hij,nj->hni", rotations, pa) + translations[:, None, :]
+        sq = np.einsum("hni,hni->hn", pb[None] - moved, pb[None] - moved)
+        best = int(np.argmax((sq <= limit).sum(axis=1)))
+        inliers = np.flatnonzero(sq[best] <= limit)
+        if len(inliers) < min_cluster_size:
+            continue
+        model = fit_clusters(
+            pa[inliers], pb[inliers], np.zeros(len(inliers), dtype=np.intp), 1, scale * 1e-3
+        )
+        sigma = float(model.sigmas[0])
+        log_like = -0.5 * model.squared_error[0] / sigma**2 - len(inliers) * d * (
+            np.log(sigma) + 0.5 * _LOG_2PI
+        )
+        weight = np.log(len(inliers) / n_total)
+        if log_like + len(inliers) * weight - len(inliers) * log_outlier > price:
+            accepted.append(members[inliers])
+    return accepted
