@@ -37,10 +37,11 @@ def rotations_from_cross(cross):
 
 @dataclass
 class Moments:
-    """Per-group statistics ``(count, mean_a, mean_b, cross, scatter_a, scatter_b)``.
+    """Per-group weighted statistics of correspondences.
 
-    ``cross = sum (a - mean_a)(b - mean_b)^T`` and ``scatter_x = sum ||x - mean_x||^2``
-    over the group's rows. ``count`` may be a weighted count (see :meth:`pair`).
+    With row weights ``w`` (all 1 unless given): ``count = sum w``, the weighted means,
+    ``cross = sum w (a - mean_a)(b - mean_b)^T`` and ``scatter_x = sum w ||x - mean_x||^2``
+    over the group's rows; ``size`` is the number of rows, whatever their weights.
     """
 
     count: np.ndarray
@@ -49,6 +50,7 @@ class Moments:
     cross: np.ndarray
     scatter_a: np.ndarray
     scatter_b: np.ndarray
+    size: np.ndarray
 
     def take(self, index):
         """The statistics of the groups ``index``, in that order."""
@@ -64,6 +66,7 @@ class Moments:
             self.cross * factor[:, None, None],
             self.scatter_a * factor,
             self.scatter_b * factor,
+            self.size,
         )
 
     def __add__(self, other):
@@ -81,6 +84,7 @@ class Moments:
             self.cross + other.cross + between[:, None, None] * da[:, :, None] * db[:, None, :],
             self.scatter_a + other.scatter_a + between * np.einsum("ij,ij->i", da, da),
             self.scatter_b + other.scatter_b + between * np.einsum("ij,ij->i", db, db),
+            self.size + other.size,
         )
 
     def fit(self):
@@ -90,7 +94,7 @@ class Moments:
         return rotations, translations
 
     def squared_error(self, rotations, translations):
-        """``sum ||b - R a - t||^2`` over each group's rows, under the motion given for it."""
+        """``sum w ||b - R a - t||^2`` over each group's rows, under the motion given for it."""
         turned = np.einsum("kij,kji->k", rotations, self.cross)
         offset = self.mean_b - np.einsum("kij,kj->ki", rotations, self.mean_a) - translations
         error = self.scatter_b + self.scatter_a - 2.0 * turned
@@ -98,7 +102,7 @@ class Moments:
         return np.maximum(error, 0.0)
 
 
-def group_moments(a, b, labels, n_groups):
+def group_moments(a, b, labels, n_groups, weights=None):
     """:class:`Moments` of every group; rows with negative labels are left out.
 
     Parameters
@@ -106,6 +110,8 @@ def group_moments(a, b, labels, n_groups):
     a, b : ndarray of shape (n, d)
     labels : ndarray of shape (n,)
     n_groups : int
+    weights : ndarray of shape (n,), default=None
+        Positive weight of each row (the inverse variance of its noise); None: all 1.
 
     Returns
     -------
@@ -128,24 +134,27 @@ def group_moments(a, b, labels, n_groups):
     b = np.asarray(b, dtype=float)
     labels = np.asarray(labels, dtype=np.intp)
     keep = labels >= 0
+    w = np.ones(len(labels)) if weights is None else np.asarray(weights, dtype=float)
     if not keep.all():
-        a, b, labels = a[keep], b[keep], labels[keep]
+        a, b, labels, w = a[keep], b[keep], labels[keep], w[keep]
     d = a.shape[1]
-    count = np.bincount(labels, minlength=n_groups)[:n_groups].astype(float)
-    safe = np.maximum(count, 1.0)
+    size = np.bincount(labels, minlength=n_groups)[:n_groups]
 
     def sums(column):
         return np.bincount(labels, weights=column, minlength=n_groups)[:n_groups]
 
-    mean_a = np.column_stack([sums(a[:, k]) for k in range(d)]) / safe[:, None]
-    mean_b = np.column_stack([sums(b[:, k]) for k in range(d)]) / safe[:, None]
+    count = sums(w)
+    safe = np.where(count > 0, count, 1.0)
+    mean_a = np.column_stack([sums(w * a[:, k]) for k in range(d)]) / safe[:, None]
+    mean_b = np.column_stack([sums(w * b[:, k]) for k in range(d)]) / safe[:, None]
     # Centred first: raw second moments cancel badly far from the origin.
     ca = a - mean_a[labels]
     cb = b - mean_b[labels]
+    wa = ca * w[:, None]
     cross = np.empty((n_groups, d, d))
     for p in range(d):
         for q in range(d):
-            cross[:, p, q] = sums(ca[:, p] * cb[:, q])
-    scatter_a = sums(np.einsum("ij,ij->i", ca, ca))
-    scatter_b = sums(np.einsum("ij,ij->i", cb, cb))
-    return Moments(count, mean_a, mean_b, cross, scatter_a, scatter_b)
+            cross[:, p, q] = sums(wa[:, p] * cb[:, q])
+    scatter_a = sums(np.einsum("ij,ij->i", wa, ca))
+    scatter_b = sums(w * np.einsum("ij,ij->i", cb, cb))
+    return Moments(count, mean_a, mean_b, cross, scatter_a, scatter_b, size)

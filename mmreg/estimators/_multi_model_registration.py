@@ -9,17 +9,27 @@ from sklearn.base import _fit_context
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted
 
+from mmreg._gate import ClusterGate
+from mmreg._likelihood import morton_order
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
 from mmreg.estimators._robust_em import robust_multi_model_em
-from mmreg.estimators._robust_steps import reject_outliers
+from mmreg.estimators._robust_steps import (
+    assign_correspondences,
+    range_noise_scale,
+    reject_outliers,
+)
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["MultiModelRegistration", "ScaleWarning"]
 
 # Points sampled to estimate the spacing of the a-points for the units check.
 _SPACING_SAMPLE = 2000
+# A gate of fewer than this many nearest-neighbour distances lets a cluster grow by a
+# point or two per iteration and merges nothing: the units of tau are probably wrong.
+_MIN_GATE_SPACINGS = 4.0
 
 
 class ScaleWarning(UserWarning):
@@ -93,6 +103,15 @@ class MultiModelRegistration(BaseRegistration):
     n_hypotheses : int, default=32
         Robust variant: minimal samples drawn in each group of unexplained
         correspondences to propose a new motion; 0 proposes none.
+    noise_model : {"range", "constant"}, default="range"
+        Robust variant. ``"range"``: correspondence ``i`` of cluster ``j`` has noise
+        ``sigma_j g_i`` with ``g_i = 1 + c ||a_i||^2``, the sensor at the origin of the
+        a-points' frame (stereo depth errs by the square of the range); ``c >= 0`` is
+        estimated by maximum likelihood every iteration and is 0 when the noise does not
+        grow with range. ``"constant"``: ``sigma_j`` for every member.
+    tol : float in [0, 1), default=1e-3
+        Robust variant: the iterations have converged when one merges and proposes
+        nothing and changes the label of at most this fraction of the correspondences.
     sigma_floor : float or None, default=None
         Smallest noise scale ``sigma_j``. None uses ``1e-6`` times the RMS spread of the
         b-points, which keeps noiseless data well posed (see Notes).
@@ -134,6 +153,9 @@ class MultiModelRegistration(BaseRegistration):
     log_outlier_density_ : float
         Robust variant: ``log(pi_0 / V)``, the fitted outlier component, which
         :meth:`predict` compares each correspondence's likelihood with.
+    noise_growth_ : float
+        Robust variant: ``c`` of the noise scale ``sigma_j (1 + c ||a||^2)``; ``sigmas_``
+        are then the scales at the origin.
     n_features_in_ : int
         Number of columns of ``X`` (``2 * d``).
 
@@ -161,7 +183,9 @@ class MultiModelRegistration(BaseRegistration):
        noise scale in the test is what keeps a background whose noise grows with depth
        in one piece.
     3. Clusters below ``min_cluster_size`` are removed (Algorithm 1, lines 10-13).
-    4. The E-step and classification of eq. (7), unchanged.
+    4. The E-step and classification of eq. (7), with the noise scale of each
+       correspondence (``noise_model``): a background whose depth errors grow with range
+       does not split into depth layers, nor swallow the near objects in front of it.
     5. *Outliers*: a correspondence stays in its cluster ``j`` only if
        ``pi_j N(r; 0, sigma_j^2 I) >= pi_0 / V``, a uniform component over the bounding
        box (volume ``V``) of the b-points whose weight ``pi_0`` is the share of outliers
@@ -173,6 +197,12 @@ class MultiModelRegistration(BaseRegistration):
        outlier component's by more than the BIC price of a motion and a noise scale.
        A car in the same initial cluster as the road under it becomes its own cluster;
        scattered wrong correspondences, agreeing on no motion, never do.
+
+    Initial clusters should be spatial pieces (Euclidean, DBSCAN, SAM masks, k-means on
+    the a-points, voxels): that every initial cluster mixes two motions in equal parts
+    (random labels) is the one case where the paper variant does better, since its
+    clusters compete until one motion wins each, while the robust variant merges such
+    clusters first (their average motions agree).
 
     **When to use the paper variant**: to reproduce the paper, or on clean data whose
     initial clusters already satisfy Definition 2, where both give the same objects
@@ -194,8 +224,9 @@ class MultiModelRegistration(BaseRegistration):
       variant: on their inliers).
 
     Warnings: a :class:`~sklearn.exceptions.ConvergenceWarning` when ``max_iter`` ends
-    the iterations before they settle, and a :class:`ScaleWarning` when ``tau`` is below
-    the median spacing of the a-points (the points are probably in other units).
+    the iterations before they settle, and a :class:`ScaleWarning` when ``tau`` is less
+    than four times the median nearest-neighbour distance of the a-points (the points are
+    probably in other units than ``tau``).
 
     Each iteration costs one batched SVD for the poses of the clusters that changed and
     scores each spatial block of correspondences only against the clusters whose
@@ -244,6 +275,8 @@ class MultiModelRegistration(BaseRegistration):
         "variant": [StrOptions({"robust", "paper"})],
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "n_hypotheses": [Interval(Integral, 0, None, closed="left")],
+        "noise_model": [StrOptions({"range", "constant"})],
+        "tol": [Interval(Real, 0, 1, closed="left")],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
     }
@@ -258,6 +291,8 @@ class MultiModelRegistration(BaseRegistration):
         variant="robust",
         confidence=0.999,
         n_hypotheses=32,
+        noise_model="range",
+        tol=1e-3,
         sigma_floor=None,
         random_state=None,
         verbose=0,
@@ -269,6 +304,8 @@ class MultiModelRegistration(BaseRegistration):
         self.variant = variant
         self.confidence = confidence
         self.n_hypotheses = n_hypotheses
+        self.noise_model = noise_model
+        self.tol = tol
         self.sigma_floor = sigma_floor
         self.random_state = random_state
         self.verbose = verbose
@@ -314,11 +351,14 @@ class MultiModelRegistration(BaseRegistration):
                 sigma_floor=self.sigma_floor,
                 confidence=self.confidence,
                 n_hypotheses=self.n_hypotheses,
+                noise_model=self.noise_model,
+                tol=self.tol,
                 random_state=self.random_state,
                 verbose=self.verbose,
             )
             self.history_ = result.history
             self.log_outlier_density_ = result.log_outlier_density
+            self.noise_growth_ = result.noise_growth
         self._store_clusters(
             a, result.labels, result.rotations, result.translations, result.sigmas, result.weights
         )
@@ -338,11 +378,12 @@ class MultiModelRegistration(BaseRegistration):
         if self.tau is None:
             return
         spacing = median_spacing(a)
-        if spacing > self.tau:
+        if self.tau < _MIN_GATE_SPACINGS * spacing:
             warnings.warn(
-                f"tau={self.tau:g} is below the median spacing of the a-points "
-                f"({spacing:.3g}): no two correspondences are within the gate, so nothing "
-                "can merge. Are tau and the points in the same units?",
+                f"tau={self.tau:g} spans fewer than {_MIN_GATE_SPACINGS:g} times the median "
+                f"distance between neighbouring a-points ({spacing:.3g}): clusters can grow "
+                "by a point or two per iteration and hardly merge. Are tau and the points in "
+                "the same units?",
                 ScaleWarning,
                 stacklevel=3,
             )
@@ -364,17 +405,25 @@ class MultiModelRegistration(BaseRegistration):
         -------
         labels : ndarray of shape (n_samples,)
         """
-        labels = super().predict(X)
         if self.variant == "paper":
-            return labels
+            return super().predict(X)
+        check_is_fitted(self, "labels_")
         _, a, b = self._validate_correspondences(X, reset=False)
-        return reject_outliers(
+        scale = self._noise_scale(a)
+        gate = ClusterGate(self._cluster_points, self.labels_, self.n_clusters_, self.tau)
+        parameters = (self.rotations_, self.translations_, self.sigmas_, self.weights_)
+        labels = assign_correspondences(
             a,
             b,
-            labels,
-            self.rotations_,
-            self.translations_,
-            self.sigmas_,
-            self.weights_,
-            self.log_outlier_density_,
+            *parameters,
+            gate,
+            np.full(len(a), -1, dtype=np.intp),
+            morton_order(np.ascontiguousarray(a.T)),
+            scale,
         )
+        return reject_outliers(a, b, labels, *parameters, self.log_outlier_density_, scale)
+
+    def _noise_scale(self, a):
+        """Each correspondence's relative noise scale ``g_i`` (None: all 1)."""
+        growth = getattr(self, "noise_growth_", 0.0)
+        return range_noise_scale(a, growth) if growth > 0 else None

@@ -7,9 +7,13 @@ correspondence to its most likely cluster within the gate); the named steps of
 1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member;
 2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`);
 3. removal of small clusters (Algorithm 1, lines 10-13);
-4. the paper's E-step and classification (:func:`~mmreg._likelihood.classify`), unchanged;
+4. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
+   correspondence's noise scale ``sigma_j g_i`` growing with its range when the data say
+   so (:func:`estimate_range_growth`);
 5. the outlier component (:func:`reject_outliers`);
-6. new clusters from what no cluster explains (:func:`propose_clusters`).
+6. new clusters from what no cluster explains (:func:`propose_clusters`): this is also
+   how a cluster holding two motions splits, since the trimmed M-step fits the majority
+   and leaves the other motion's correspondences unexplained.
 """
 
 from dataclasses import dataclass, field
@@ -18,15 +22,19 @@ import numpy as np
 from sklearn.utils import check_random_state
 
 from mmreg._gate import ClusterGate
-from mmreg._likelihood import CorrespondenceBlocks, classify, single_threaded_blas
+from mmreg._likelihood import morton_order, single_threaded_blas
 from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
 from mmreg.estimators._robust_steps import (
     adjacent_pairs,
+    assign_correspondences,
     drop_small_clusters,
+    estimate_range_growth,
     log_uniform_density,
     merge_adjacent,
     propose_clusters,
+    range_noise_scale,
     reject_outliers,
+    squared_residuals,
     trimmed_fit,
 )
 
@@ -40,6 +48,16 @@ class RobustEMResult(EMResult):
     history: list = field(default_factory=list)
     log_outlier_density: float = 0.0
     """``log(pi_0 / V)``: the outlier component's log-density at the end."""
+    noise_growth: float = 0.0
+    """``c`` of the noise scale ``sigma_j (1 + c ||a||^2)``; 0 for equal noise."""
+
+
+def _range_noise(a, b, labels, models, sigma_floor):
+    """The growth of the noise with range, and each correspondence's noise scale."""
+    clustered = np.where(labels < len(models.sigmas), labels, -1)
+    squared = squared_residuals(a, b, clustered, models.rotations, models.translations)
+    growth = estimate_range_growth(a, squared, clustered, len(models.sigmas), sigma_floor)
+    return growth, (range_noise_scale(a, growth) if growth > 0 else None)
 
 
 def _weights(counts, n):
@@ -57,6 +75,8 @@ def robust_multi_model_em(
     sigma_floor=None,
     confidence=0.999,
     n_hypotheses=32,
+    noise_model="range",
+    tol=1e-3,
     random_state=None,
     verbose=0,
 ):
@@ -76,6 +96,13 @@ def robust_multi_model_em(
         Inlier quantile of the residual tests of the trimmed M-step and of proposals.
     n_hypotheses : int, default=32
         Minimal samples drawn in each group of unexplained correspondences.
+    noise_model : {"range", "constant"}, default="range"
+        ``"range"``: correspondence ``i`` of cluster ``j`` has noise ``sigma_j (1 + c
+        ||a_i||^2)``, with ``c >= 0`` estimated by maximum likelihood every iteration (0
+        when the noise does not grow with range); ``"constant"``: ``sigma_j``.
+    tol : float, default=1e-3
+        Converged when an iteration merges and proposes nothing and changes the label of
+        at most this fraction of the correspondences (0: of none, as Algorithm 1).
     random_state : int, RandomState instance or None, default=None
         Seeds the proposals' samples.
     verbose : int, default=0
@@ -93,37 +120,44 @@ def robust_multi_model_em(
         sigma_floor = default_sigma_floor(b)
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(b)
-    blocks = CorrespondenceBlocks(a, b) if max_iter > 0 else None
+    order = morton_order(np.ascontiguousarray(a.T))
     history = []
     converged = False
     n_iter = 0
     outlier_share = None
+    noise_scale = None
     with single_threaded_blas():
         for _ in range(max_iter):
             if n_clusters == 0:
-                # Nothing left to fit, merge or assign to; proposals found nothing either.
+                # Nothing left to fit, merge or assign to.
                 converged = True
                 break
             n_iter += 1
-            # 1. M-step on inliers.
+            # 1. M-step on inliers. The noise's growth with range comes from the last
+            # iteration's clusters; the first estimates it from the initial ones.
             inliers, models = trimmed_fit(
-                a, b, labels, n_clusters, sigma_floor, confidence=confidence
+                a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
             )
+            if noise_model == "range" and n_iter == 1:
+                growth, noise_scale = _range_noise(a, b, inliers, models, sigma_floor)
+                if noise_scale is not None:
+                    inliers, models = trimmed_fit(
+                        a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
+                    )
             if outlier_share is None:
                 outlier_share = np.mean(inliers < 0)
             # 2. Merge adjacent clusters that share a motion.
             pairs = adjacent_pairs(a, inliers, n_clusters, tau)
             root, models, n_merges = merge_adjacent(models, pairs, d, sigma_floor)
+            members = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
             # 3. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
-            counts = np.bincount(root[labels[labels >= 0]], minlength=n_clusters)
-            own, kept = drop_small_clusters(
-                np.where(labels >= 0, root[np.maximum(labels, 0)], -1), counts, min_cluster_size
-            )
+            counts = np.bincount(members[members >= 0], minlength=n_clusters)
+            own, kept = drop_small_clusters(members, counts, min_cluster_size)
             models = models.take(kept)
             weights = _weights(counts[kept], n)
-            # 4. The paper's E-step and classification, gated by tau.
+            # 4. E-step and classification of eq. (7), gated by tau.
             gate = ClusterGate(a, own, len(kept), tau)
-            new = classify(
+            new = assign_correspondences(
                 a,
                 b,
                 models.rotations,
@@ -132,8 +166,8 @@ def robust_multi_model_em(
                 weights,
                 gate,
                 own,
-                blocks=blocks,
-                limit_blas=False,
+                order,
+                noise_scale,
             )
             # 5. The outlier component.
             log_outlier = np.log(max(outlier_share, 1.0 / n)) + log_volume_density
@@ -146,6 +180,7 @@ def robust_multi_model_em(
                 models.sigmas,
                 weights,
                 log_outlier,
+                noise_scale,
             )
             outlier_share = np.mean(new < 0)
             # 6. New clusters from the unexplained correspondences.
@@ -160,6 +195,8 @@ def robust_multi_model_em(
                 n,
                 rng,
                 min_cluster_size=min_cluster_size,
+                sigma_floor=sigma_floor,
+                noise_scale=noise_scale,
                 n_hypotheses=n_hypotheses,
                 confidence=confidence,
             )
@@ -170,17 +207,21 @@ def robust_multi_model_em(
                 "iteration": n_iter,
                 "clusters": int(len(kept)),
                 "merges": int(n_merges),
-                "dropped": int(np.count_nonzero(counts[counts > 0] < min_cluster_size)),
+                "dropped": int(np.count_nonzero((counts > 0) & (counts < min_cluster_size))),
                 "outliers": int(np.count_nonzero(new < 0)),
                 "proposed": len(found),
+                "noise_growth": 0.0 if noise_scale is None else float(growth),
             }
             history.append(step)
-            if verbose:
-                print(", ".join(f"{key} {value}" for key, value in step.items()))
+            if noise_model == "range" and len(models.sigmas):
+                growth, noise_scale = _range_noise(a, b, new, models, sigma_floor)
             new, n_clusters = _compact_initial(new)
-            unchanged = len(labels) == len(new) and np.array_equal(new, labels)
+            n_changed = int(np.count_nonzero(new != labels)) if len(new) == len(labels) else n
+            step["changed"] = n_changed
+            if verbose:
+                print(", ".join(f"{key} {value:g}" for key, value in step.items()))
             labels = new
-            if unchanged and not n_merges and not found:
+            if n_changed <= tol * n and not n_merges and not found:
                 converged = True
                 break
     # Final clean-up: no cluster below m_min; clusters numbered by size.
@@ -189,7 +230,9 @@ def robust_multi_model_em(
     n_clusters = len(kept)
     rank = _size_rank(labels, n_clusters)
     labels = rank[labels]
-    _, models = trimmed_fit(a, b, labels, n_clusters, sigma_floor, confidence=confidence)
+    _, models = trimmed_fit(
+        a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
+    )
     weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), n)
     return RobustEMResult(
         labels,
@@ -201,4 +244,5 @@ def robust_multi_model_em(
         converged,
         history,
         float(np.log(max(np.mean(labels < 0), 1.0 / max(n, 1))) + log_volume_density),
+        0.0 if noise_scale is None else float(growth),
     )

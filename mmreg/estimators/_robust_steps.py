@@ -27,17 +27,22 @@ from mmreg._moments import Moments, group_moments
 __all__ = [
     "ClusterModels",
     "adjacent_pairs",
+    "assign_correspondences",
     "drop_small_clusters",
+    "estimate_range_growth",
     "fit_clusters",
     "log_uniform_density",
     "merge_adjacent",
     "propose_clusters",
+    "range_noise_scale",
     "reject_outliers",
     "squared_residuals",
     "trimmed_fit",
 ]
 
 _LOG_2PI = np.log(2.0 * np.pi)
+# Correspondences per spatial run of the E-step.
+_RUN = 2048
 
 
 def motion_parameters(d):
@@ -54,11 +59,11 @@ class ClusterModels:
     sigmas: np.ndarray
     moments: Moments
     squared_error: np.ndarray
-    """Sum of squared residuals of each cluster's members under its own motion."""
+    """Weighted sum of squared residuals of each cluster's members under its own motion."""
 
     @property
     def counts(self):
-        return self.moments.count
+        return self.moments.size
 
     def take(self, index):
         return ClusterModels(
@@ -74,7 +79,7 @@ def _models_from_moments(moments, d, sigma_floor):
     rotations, translations = moments.fit()
     error = moments.squared_error(rotations, translations)
     # Unbiased: the motion's parameters were fitted to the same residuals.
-    dof = d * moments.count - motion_parameters(d)
+    dof = d * moments.size - motion_parameters(d)
     with np.errstate(divide="ignore", invalid="ignore"):
         sigmas = np.sqrt(error / dof)
     sigmas[~(dof > 0) | ~np.isfinite(sigmas)] = sigma_floor
@@ -82,9 +87,15 @@ def _models_from_moments(moments, d, sigma_floor):
     return ClusterModels(rotations, translations, sigmas, moments, error)
 
 
-def fit_clusters(a, b, labels, n_clusters, sigma_floor):
-    """Motion (Horn), unbiased noise scale and moments of every cluster."""
-    moments = group_moments(a, b, labels, n_clusters)
+def fit_clusters(a, b, labels, n_clusters, sigma_floor, noise_scale=None):
+    """Motion (weighted Horn), unbiased noise scale and moments of every cluster.
+
+    With ``noise_scale`` ``g_i``, correspondence ``i`` has noise ``sigma_j g_i``: rows
+    are weighted by ``1 / g_i^2`` and ``sigma_j`` is the scale of the normalised
+    residuals ``r_i / g_i``.
+    """
+    weights = None if noise_scale is None else noise_scale**-2
+    moments = group_moments(a, b, labels, n_clusters, weights)
     return _models_from_moments(moments, a.shape[1], sigma_floor)
 
 
@@ -98,6 +109,50 @@ def squared_residuals(a, b, labels, rotations, translations):
         diff = b[rows] - moved
         out[rows] = np.einsum("ij,ij->i", diff, diff)
     return out
+
+
+def range_noise_scale(a, growth):
+    """Relative noise scale ``g_i = 1 + growth * ||a_i||^2`` of each correspondence.
+
+    Depth from stereo or structured light, and scene flow computed from it, errs by an
+    amount that grows with the square of the range (``dz ~ z^2 d_disp / (f B)``), the
+    sensor being at the origin of the a-points' frame. ``growth = 0``: equal noise.
+    """
+    return 1.0 + growth * np.einsum("ij,ij->i", a, a)
+
+
+def estimate_range_growth(a, squared, labels, n_clusters, sigma_floor, *, n_grid=25):
+    """Maximum-likelihood ``growth`` of :func:`range_noise_scale` for the clusters given.
+
+    Each cluster keeps its own ``sigma_j``; ``growth`` is shared (a property of the
+    sensor). The likelihood of the residuals ``squared`` (``r_i^2``, of the clustered
+    correspondences) is maximised over 0 and a logarithmic grid of ``n_grid`` values
+    around ``1 / median(||a||^2)``, ``sigma_j`` profiled out in closed form; a growth
+    above 0 must raise it by more than the BIC price of one parameter.
+    """
+    rows = np.flatnonzero((labels >= 0) & np.isfinite(squared))
+    if len(rows) < 2 or n_clusters == 0:
+        return 0.0
+    d = a.shape[1]
+    range2 = np.einsum("ij,ij->i", a[rows], a[rows])
+    typical = float(np.median(range2))
+    if typical <= 0:
+        return 0.0
+    grid = np.concatenate([[0.0], np.logspace(-3, 3, n_grid) / typical])
+    j = labels[rows]
+    sizes = np.bincount(j, minlength=n_clusters)
+    floor2 = sigma_floor**2
+    log_like = np.empty(len(grid))
+    for k, growth in enumerate(grid):
+        g2 = (1.0 + growth * range2) ** 2
+        sigma2 = np.bincount(j, weights=squared[rows] / g2, minlength=n_clusters)
+        sigma2 = np.maximum(sigma2 / np.maximum(d * sizes, 1), floor2)
+        log_like[k] = -0.5 * d * np.sum(sizes * np.log(sigma2)) - 0.5 * d * np.sum(np.log(g2))
+    best = int(np.argmax(log_like))
+    # BIC: the growth is one more parameter, worth log(n) / 2 of likelihood.
+    if log_like[best] - log_like[0] <= 0.5 * np.log(len(rows)):
+        return 0.0
+    return float(grid[best])
 
 
 def _group_medians(values, labels, n_groups):
@@ -114,13 +169,17 @@ def _group_medians(values, labels, n_groups):
     return medians
 
 
-def trimmed_fit(a, b, labels, n_clusters, sigma_floor, *, confidence=0.999, rounds=2):
+def trimmed_fit(
+    a, b, labels, n_clusters, sigma_floor, noise_scale=None, *, confidence=0.999, rounds=1
+):
     """M-step on inliers: fit, drop residuals beyond a robust scale, refit.
 
     Each round fits every cluster's motion on its current inliers, estimates its noise
-    scale robustly (``sigma^2 = median(r^2) / median(chi2_d)``, valid with up to half of
-    the cluster wrong) and keeps as inliers the members whose squared residual is within
-    the ``confidence`` quantile of ``sigma^2 chi2_d``.
+    scale robustly (``sigma^2 = median(r^2 / g^2) / median(chi2_d)``, valid with up to
+    half of the cluster wrong) and keeps as inliers the members whose normalised squared
+    residual is within the ``confidence`` quantile of ``sigma^2 chi2_d``. One round is
+    enough when the E-step runs in between: it has already left out the wrong
+    correspondences of the last iteration.
 
     Returns
     -------
@@ -132,16 +191,17 @@ def trimmed_fit(a, b, labels, n_clusters, sigma_floor, *, confidence=0.999, roun
     d = a.shape[1]
     limit = chi2.ppf(confidence, d)
     median_chi2 = chi2.ppf(0.5, d)
+    g2 = 1.0 if noise_scale is None else noise_scale**2
     member = labels >= 0
     inliers = labels
     for _ in range(rounds):
-        models = fit_clusters(a, b, inliers, n_clusters, sigma_floor)
-        sq = squared_residuals(a, b, labels, models.rotations, models.translations)
+        models = fit_clusters(a, b, inliers, n_clusters, sigma_floor, noise_scale)
+        sq = squared_residuals(a, b, labels, models.rotations, models.translations) / g2
         scale2 = _group_medians(sq[member], labels[member], n_clusters) / median_chi2
         scale2 = np.maximum(np.nan_to_num(scale2, nan=0.0), sigma_floor**2)
         keep = member & (sq <= limit * np.append(scale2, np.inf)[labels])
         inliers = np.where(keep, labels, -1)
-    return inliers, fit_clusters(a, b, inliers, n_clusters, sigma_floor)
+    return inliers, fit_clusters(a, b, inliers, n_clusters, sigma_floor, noise_scale)
 
 
 def log_uniform_density(b):
@@ -157,25 +217,77 @@ def log_uniform_density(b):
     return -float(np.sum(np.log(np.maximum(extent, 1e-3 * largest))))
 
 
-def reject_outliers(a, b, labels, rotations, translations, sigmas, weights, log_outlier):
+def reject_outliers(
+    a, b, labels, rotations, translations, sigmas, weights, log_outlier, noise_scale=None
+):
     """Label -1 the correspondences the uniform outlier component explains better.
 
     Correspondence ``i`` of cluster ``j`` stays iff
-    ``pi_j N(b_i - R_j a_i - t_j; 0, sigma_j^2 I) >= pi_0 / V`` with ``log_outlier`` the
-    right-hand side's logarithm: a residual test at about 5-7 sigma, farther the more
-    weight the cluster has and the larger the scene.
+    ``pi_j N(b_i - R_j a_i - t_j; 0, (sigma_j g_i)^2 I) >= pi_0 / V`` with ``log_outlier``
+    the right-hand side's logarithm: a residual test at about 5-7 ``sigma_j g_i``, farther
+    the more weight the cluster has and the larger the scene.
     """
     d = a.shape[1]
     sq = squared_residuals(a, b, labels, rotations, translations)
     rows = np.flatnonzero(labels >= 0)
     j = labels[rows]
-    sigma = sigmas[j]
+    sigma = sigmas[j] if noise_scale is None else sigmas[j] * noise_scale[rows]
     with np.errstate(divide="ignore"):
         score = np.log(weights[j]) - d * np.log(sigma) - 0.5 * d * _LOG_2PI
     score -= 0.5 * sq[rows] / sigma**2
     out = labels.copy()
     out[rows[score < log_outlier]] = -1
     return out
+
+
+def assign_correspondences(
+    a, b, rotations, translations, sigmas, weights, gate, own, order, noise_scale=None
+):
+    """E-step and classification of eq. (7), each correspondence with its own noise scale.
+
+    Correspondence ``i`` goes to the cluster of largest ``pi_j N(r_ij; 0, (sigma_j g_i)^2 I)``
+    among those the gate admits; its own cluster wins ties (and keeps it when no other is
+    admitted). The common factor ``g_i^-d`` does not change the winner, so scores are
+    ``log pi_j - d log sigma_j - r_ij^2 / (2 sigma_j^2 g_i^2)``. Correspondences are taken
+    in spatial runs (``order``, e.g. Morton order) of 2048, each scored only against the
+    clusters whose bounding ball, grown by ``tau``, reaches the run.
+    """
+    n, d = a.shape
+    labels = own.copy()
+    k = len(rotations)
+    if k == 0:
+        return labels
+    with np.errstate(divide="ignore"):
+        log_prior = np.log(weights) - d * np.log(sigmas)
+    half_precision = 0.5 / sigmas**2
+    g2 = np.ones(n) if noise_scale is None else noise_scale**2
+    for start in range(0, n, _RUN):
+        rows = order[start : start + _RUN]
+        pa, pb = a[rows], b[rows]
+        candidates = np.flatnonzero(gate.reach_boxes(pa.min(axis=0)[None], pa.max(axis=0)[None])[0])
+        if not len(candidates):
+            continue
+        moved = np.einsum("kij,nj->nki", rotations[candidates], pa) + translations[candidates]
+        diff = pb[:, None, :] - moved
+        sq = np.einsum("nki,nki->nk", diff, diff) / g2[rows, None]
+        score = log_prior[candidates] - half_precision[candidates] * sq
+        column = np.full(k + 1, -1, dtype=np.intp)
+        column[candidates] = np.arange(len(candidates))
+        own_column = column[own[rows]]
+        has_own = own_column >= 0
+        own_score = np.full(len(rows), -np.inf)
+        own_score[has_own] = score[np.flatnonzero(has_own), own_column[has_own]]
+        challenger = score > own_score[:, None]
+        while True:
+            live = np.flatnonzero(challenger.any(axis=1))
+            if not len(live):
+                break
+            best = np.argmax(np.where(challenger[live], score[live], -np.inf), axis=1)
+            admitted = gate.admits(pa[live], candidates[best])
+            labels[rows[live[admitted]]] = candidates[best[admitted]]
+            challenger[live[admitted]] = False
+            challenger[live[~admitted], best[~admitted]] = False
+    return labels
 
 
 def adjacent_pairs(points, labels, n_clusters, tau):
@@ -293,6 +405,23 @@ def merge_adjacent(models, pairs, d, sigma_floor):
     return root, models, n_merges
 
 
+def _local_samples(points, n_samples, size, rng):
+    """Minimal samples: a random seed and ``size - 1`` of its nearest neighbours.
+
+    Nearby correspondences are the likeliest to share a motion, so local samples find
+    a small object's motion among many others' far more often than uniform ones.
+    """
+    k_near = min(len(points), 9)
+    seeds = rng.randint(len(points), size=n_samples)
+    _, near = cKDTree(points).query(points[seeds], k=k_near)
+    near = np.asarray(near).reshape(n_samples, k_near)
+    # Column 0 is the seed itself.
+    picks = np.take_along_axis(
+        near, 1 + rng.randint(max(k_near - 1, 1), size=(n_samples, size - 1)), axis=1
+    )
+    return np.column_stack([seeds, picks])
+
+
 def drop_small_clusters(labels, counts, min_cluster_size):
     """Labels with the clusters below ``min_cluster_size`` dissolved (-1), renumbered."""
     kept = counts >= min_cluster_size
@@ -312,6 +441,8 @@ def propose_clusters(
     rng,
     *,
     min_cluster_size,
+    sigma_floor,
+    noise_scale=None,
     n_hypotheses=32,
     confidence=0.999,
 ):
@@ -321,7 +452,7 @@ def propose_clusters(
     groups of their a-points; in every group of at least ``min_cluster_size``, minimal
     samples are drawn locally (a random seed and two of its nearest unexplained
     neighbours) and the hypothesis with most inliers (residual within the ``confidence``
-    quantile of ``scale^2 chi2_d``) is refitted on them. It becomes a cluster only if its
+    quantile of ``(scale g_i)^2 chi2_d``) is refitted on them. It becomes a cluster only if its
     inliers' log-likelihood under it beats that under the outlier density by more than
     the BIC price of a motion and a noise scale: wrong correspondences that agree on no
     motion never form one.
@@ -333,6 +464,8 @@ def propose_clusters(
     """
     d = a.shape[1]
     size = minimal_sample_size(d)
+    if noise_scale is None:
+        noise_scale = np.ones(len(a))
     rows = np.flatnonzero(unexplained)
     if len(rows) < max(min_cluster_size, size + 1):
         return []
@@ -343,32 +476,22 @@ def propose_clusters(
     accepted = []
     for c in np.flatnonzero(counts >= max(min_cluster_size, size + 1)):
         members = rows[component == c]
-        pa, pb = a[members], b[members]
-        k_near = min(len(members), 9)
-        seeds = rng.randint(len(members), size=n_hypotheses)
-        # Local samples: a correspondence's nearest unexplained neighbours are the
-        # likeliest to share its motion (column 0 is the seed itself).
-        _, near = cKDTree(pa).query(pa[seeds], k=k_near)
-        near = near.reshape(n_hypotheses, k_near)
-        picks = np.take_along_axis(
-            near, 1 + rng.randint(k_near - 1, size=(n_hypotheses, size - 1)), axis=1
-        )
-        samples = np.column_stack([seeds, picks])
+        pa, pb, g = a[members], b[members], noise_scale[members]
+        samples = _local_samples(pa, n_hypotheses, size, rng)
         rotations, translations, valid = fit_minimal_samples(pa, pb, samples)
         if not len(rotations):
             continue
         moved = np.einsum("hij,nj->hni", rotations, pa) + translations[:, None, :]
-        sq = np.einsum("hni,hni->hn", pb[None] - moved, pb[None] - moved)
+        sq = np.einsum("hni,hni->hn", pb[None] - moved, pb[None] - moved) / g**2
         best = int(np.argmax((sq <= limit).sum(axis=1)))
         inliers = np.flatnonzero(sq[best] <= limit)
         if len(inliers) < min_cluster_size:
             continue
-        model = fit_clusters(
-            pa[inliers], pb[inliers], np.zeros(len(inliers), dtype=np.intp), 1, scale * 1e-3
-        )
+        one = np.zeros(len(inliers), dtype=np.intp)
+        model = fit_clusters(pa[inliers], pb[inliers], one, 1, sigma_floor, g[inliers])
         sigma = float(model.sigmas[0])
-        log_like = -0.5 * model.squared_error[0] / sigma**2 - len(inliers) * d * (
-            np.log(sigma) + 0.5 * _LOG_2PI
+        log_like = -0.5 * model.squared_error[0] / sigma**2 - d * np.sum(
+            np.log(sigma * g[inliers]) + 0.5 * _LOG_2PI
         )
         weight = np.log(len(inliers) / n_total)
         if log_like + len(inliers) * weight - len(inliers) * log_outlier > price:

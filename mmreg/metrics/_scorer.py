@@ -17,7 +17,7 @@ should hold a whole scene, scored on the same correspondences it was fitted on:
 >>> init = np.arange(200) % 8                       # any initial over-segmentation
 >>> everything = np.arange(200)
 >>> search = GridSearchCV(
-...     MultiModelRegistration(init=init), {"max_iter": [0, 10]},
+...     MultiModelRegistration(init=init, variant="paper"), {"max_iter": [0, 10]},
 ...     scoring=make_iou_scorer(), cv=[(everything, everything)],
 ... ).fit(scene.X, scene.labels)
 >>> search.best_params_, float(search.best_score_)
