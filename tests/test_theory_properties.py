@@ -9,11 +9,13 @@ condition is broken, and that Algorithm 1 then recovers every object exactly.
 import warnings
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from mmreg import MultiModelRegistration
 from mmreg._geometry import fit_rigid
+from mmreg.estimators._robust_steps import fit_clusters, range_noise_scale
 from mmreg.testing import ground_truth_scenes, scenes_with_good_clusterings
 from mmreg.theory import is_good_clustering, satisfies_ground_truth
 
@@ -182,14 +184,20 @@ THEOREM_M0 = (20, 40)
         alpha=THEOREM_ALPHA, m0=THEOREM_M0, points_per_object=(60, 200), max_pieces=5
     )
 )
-def test_theorem_1_em_recovers_every_object(pair):
+@pytest.mark.parametrize("variant", ["robust", "paper"])
+def test_theorem_1_em_recovers_every_object(variant, pair):
     scene, clustering = pair
     assert ground_truth(scene)
     assert is_good_clustering(
         clustering.labels, scene.labels, scene.X, scene.tau, clustering.alpha, clustering.m0
     )
     estimator = MultiModelRegistration(
-        init=clustering.labels, tau=scene.tau, min_cluster_size=clustering.m0, max_iter=1000
+        init=clustering.labels,
+        tau=scene.tau,
+        min_cluster_size=clustering.m0,
+        max_iter=1000,
+        variant=variant,
+        random_state=0,
     )
     with warnings.catch_warnings():
         # Outlier clusters may be degenerate; they do not matter here.
@@ -204,17 +212,26 @@ def test_theorem_1_em_recovers_every_object(pair):
         assert len(cluster) == 1 and cluster[0] >= 0, f"object {j} split into {cluster}"
         np.testing.assert_array_equal(found == cluster[0], obj)
 
-        # Its pose is Horn's method on G_j itself...
+        # Its pose is Horn's method on G_j itself (weighted by the fitted noise model
+        # when the robust variant found the noise growing with range)...
         rotation, translation = (
             estimator.rotations_[cluster[0]],
             estimator.translations_[cluster[0]],
         )
-        horn_rotation, horn_translation = fit_rigid(scene.a[obj], scene.b[obj])
+        if getattr(estimator, "noise_growth_", 0.0) > 0:
+            scale = range_noise_scale(scene.a[obj], estimator.noise_growth_)
+            one = np.zeros(obj.sum(), dtype=int)
+            weighted = fit_clusters(scene.a[obj], scene.b[obj], one, 1, 1e-12, scale)
+            horn_rotation, horn_translation = weighted.rotations[0], weighted.translations[0]
+        else:
+            horn_rotation, horn_translation = fit_rigid(scene.a[obj], scene.b[obj])
         np.testing.assert_allclose(rotation, horn_rotation, atol=1e-9)
         np.testing.assert_allclose(translation, horn_translation, atol=1e-9)
         # ...so it moves G_j to within twice the RMS noise of the true motion: the true
         # motion is a candidate of the least-squares fit, so ||noise - deviation|| <=
         # ||noise||, and ||deviation|| <= 2 ||noise|| <= 2 sqrt(3) sigma (RMS over G_j).
+        if getattr(estimator, "noise_growth_", 0.0) > 0:
+            continue  # the bound below is that of the unweighted fit
         a, b = scene.a[obj], scene.b[obj]
         true = a @ scene.rotations[j].T + scene.translations[j]
         deviation = a @ rotation.T + translation - true

@@ -1,13 +1,17 @@
-"""Registration estimators: the paper's Classification-EM and what they all share."""
+"""Registration estimators: the robust default, the paper's Algorithm 1, and what they share."""
 
 from mmreg.estimators._base import BaseRegistration, DegenerateInputWarning
 from mmreg.estimators._em import EMResult, multi_model_em
-from mmreg.estimators._multi_model_registration import MultiModelRegistration
+from mmreg.estimators._multi_model_registration import MultiModelRegistration, ScaleWarning
+from mmreg.estimators._robust_em import RobustEMResult, robust_multi_model_em
 
 __all__ = [
     "BaseRegistration",
     "DegenerateInputWarning",
     "EMResult",
     "MultiModelRegistration",
+    "RobustEMResult",
+    "ScaleWarning",
     "multi_model_em",
+    "robust_multi_model_em",
 ]

@@ -194,6 +194,7 @@ def robust_multi_model_em(
                 log_outlier,
                 n,
                 rng,
+                log_volume_density=log_volume_density,
                 min_cluster_size=min_cluster_size,
                 sigma_floor=sigma_floor,
                 noise_scale=noise_scale,

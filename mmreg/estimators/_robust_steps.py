@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.stats import chi2
+from scipy.special import gamma
+from scipy.stats import binom, chi2
 
 from mmreg._connectivity import tau_components
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
@@ -440,6 +441,7 @@ def propose_clusters(
     n_total,
     rng,
     *,
+    log_volume_density,
     min_cluster_size,
     sigma_floor,
     noise_scale=None,
@@ -454,8 +456,13 @@ def propose_clusters(
     neighbours) and the hypothesis with most inliers (residual within the ``confidence``
     quantile of ``(scale g_i)^2 chi2_d``) is refitted on them. It becomes a cluster only if its
     inliers' log-likelihood under it beats that under the outlier density by more than
-    the BIC price of a motion and a noise scale: wrong correspondences that agree on no
-    motion never form one.
+    the BIC price of a motion and a noise scale, and if so many inliers are not to be
+    expected by chance: with ``p`` the share of the scene's volume ``V`` within the
+    inlier radius of a point's predicted position, the number of false alarms
+    ``N_tests P(Binomial(m - 3, p) >= k - 3)`` of ``k`` inliers among ``m`` must stay
+    below 1, ``N_tests`` counting every hypothesis drawn (the a-contrario test of
+    AC-RANSAC, Moisan and Stival 2004). Wrong correspondences that agree on no motion
+    never form a cluster.
 
     Returns
     -------
@@ -473,8 +480,12 @@ def propose_clusters(
     counts = np.bincount(component)
     limit = chi2.ppf(confidence, d) * scale**2
     price = 0.5 * (motion_parameters(d) + 1) * np.log(n_total)
+    groups = np.flatnonzero(counts >= max(min_cluster_size, size + 1))
+    n_tests = max(len(groups) * n_hypotheses, 1)
+    # Volume of a d-ball of radius 1.
+    unit_ball = np.pi ** (d / 2) / gamma(d / 2 + 1)
     accepted = []
-    for c in np.flatnonzero(counts >= max(min_cluster_size, size + 1)):
+    for c in groups:
         members = rows[component == c]
         pa, pb, g = a[members], b[members], noise_scale[members]
         samples = _local_samples(pa, n_hypotheses, size, rng)
@@ -494,6 +505,11 @@ def propose_clusters(
             np.log(sigma * g[inliers]) + 0.5 * _LOG_2PI
         )
         weight = np.log(len(inliers) / n_total)
-        if log_like + len(inliers) * weight - len(inliers) * log_outlier > price:
+        if log_like + len(inliers) * weight - len(inliers) * log_outlier <= price:
+            continue
+        radius = np.sqrt(limit) * float(np.median(g[inliers]))
+        chance = min(1.0, unit_ball * radius**d * np.exp(log_volume_density))
+        tail = binom.sf(len(inliers) - size - 1, len(members) - size, chance)
+        if n_tests * tail < 1.0:
             accepted.append(members[inliers])
     return accepted
