@@ -27,8 +27,8 @@ _BLOB_ASPECT = (1.0, 2.5)
 _BLOB_SIZE = (0.5, 1.5)
 # Magnitude of a gross error, in units of gross_error_scale.
 _GROSS_MAGNITUDE = (0.5, 1.5)
-# Deviation of each blob member from its blob's mean offset, relative to that offset.
-_BLOB_SPREAD = 0.3
+# Deviation of each blob member from its blob's mean offset (across it), relative to it.
+_BLOB_SPREAD = 1.0
 
 
 def _check_real(value, name, *, low=0.0, high=None, allow_none=False):
@@ -206,11 +206,12 @@ def corrupt_scene_flow(
        offset of random direction and magnitude ``gross_error_scale * U(0.5, 1.5)``.
        ``round(blob_fraction * n_gross)`` of them form coherent elliptic blobs in the
        image (about 200 points per blob) that share one mean offset per blob, each point
-       deviating from it by 30 % of its size in a random direction, as a network fails
+       deviating from it across its direction by as much as its size, as a network fails
        on a whole textureless or occluded region (errors correlated over the region, but
        no rigid motion of their own: a blob of one exact offset would be a moving object
        in all but name); the rest are independent points anywhere, each with its own
-       offset. Blob errors are thus ``0.7-1.3`` times their blob's offset.
+       offset. Blob errors are thus ``sqrt(2)`` times their blob's offset, at 45 degrees
+       to it.
 
     Parameters
     ----------
@@ -349,10 +350,17 @@ def corrupt_scene_flow(
             # size: correlated like a network's failure on a region, but no rigid motion
             # (a blob of one exact offset would be a moving object in all but name).
             offsets[:n_blob] = _random_offsets(n_blobs, gross_error_scale, rng)[blob]
+            # Deviation across the mean offset, as large as it: never a smaller error.
+            mean = offsets[:n_blob]
             deviation = rng.normal(size=(n_blob, 3))
+            deviation -= (
+                np.sum(deviation * mean, axis=1, keepdims=True)
+                / np.sum(mean * mean, axis=1, keepdims=True)
+                * mean
+            )
             deviation /= np.linalg.norm(deviation, axis=1, keepdims=True)
-            size = _BLOB_SPREAD * np.linalg.norm(offsets[:n_blob], axis=1, keepdims=True)
-            offsets[:n_blob] += size * deviation
+            size = _BLOB_SPREAD * np.linalg.norm(mean, axis=1, keepdims=True)
+            offsets[:n_blob] = mean + size * deviation
         rest = np.setdiff1d(np.arange(n), gross[:n_blob], assume_unique=True)
         gross[n_blob:] = rng.choice(rest, size=n_gross - n_blob, replace=False)
         offsets[n_blob:] = _random_offsets(n_gross - n_blob, gross_error_scale, rng)
