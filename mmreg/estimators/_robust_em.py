@@ -6,12 +6,13 @@ correspondence to its most likely cluster within the gate); the named steps of
 
 1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member;
 2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`);
-3. removal of small clusters (Algorithm 1, lines 10-13);
-4. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
+3. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`);
+4. removal of small clusters (Algorithm 1, lines 10-13);
+5. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
    correspondence's noise scale ``sigma_j g_i`` growing with its range when the data say
    so (:func:`estimate_range_growth`);
-5. the outlier component (:func:`reject_outliers`);
-6. new clusters from what no cluster explains (:func:`propose_clusters`): this is also
+6. the outlier component (:func:`reject_outliers`);
+7. new clusters from what no cluster explains (:func:`propose_clusters`): this is also
    how a cluster holding two motions splits, since the trimmed M-step fits the majority
    and leaves the other motion's correspondences unexplained.
 """
@@ -19,6 +20,7 @@ correspondence to its most likely cluster within the gate); the named steps of
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
 
 from mmreg._gate import ClusterGate
@@ -27,6 +29,7 @@ from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default
 from mmreg.estimators._robust_steps import (
     adjacent_pairs,
     assign_correspondences,
+    boundary_layers,
     drop_small_clusters,
     estimate_range_growth,
     log_uniform_density,
@@ -121,6 +124,8 @@ def robust_multi_model_em(
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(b)
     order = morton_order(np.ascontiguousarray(a.T))
+    # Each a-point's nearest neighbour: the local sampling density.
+    spacing = cKDTree(a).query(a, k=2)[0][:, -1] if n > 1 else np.zeros(n)
     history = []
     converged = False
     n_iter = 0
@@ -150,12 +155,15 @@ def robust_multi_model_em(
             pairs = adjacent_pairs(a, inliers, n_clusters, tau)
             root, models, n_merges = merge_adjacent(models, pairs, d, sigma_floor)
             members = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
-            # 3. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
+            # 3. Dissolve layers of flow that bled along another cluster's boundary.
+            bled = boundary_layers(a, members, n_clusters, spacing)
+            members[np.isin(members, bled)] = -1
+            # 4. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
             counts = np.bincount(members[members >= 0], minlength=n_clusters)
             own, kept = drop_small_clusters(members, counts, min_cluster_size)
             models = models.take(kept)
             weights = _weights(counts[kept], n)
-            # 4. E-step and classification of eq. (7), gated by tau.
+            # 5. E-step and classification of eq. (7), gated by tau.
             gate = ClusterGate(a, own, len(kept), tau)
             new = assign_correspondences(
                 a,
@@ -169,7 +177,7 @@ def robust_multi_model_em(
                 order,
                 noise_scale,
             )
-            # 5. The outlier component.
+            # 6. The outlier component.
             log_outlier = np.log(max(outlier_share, 1.0 / n)) + log_volume_density
             new = reject_outliers(
                 a,
@@ -183,8 +191,8 @@ def robust_multi_model_em(
                 noise_scale,
             )
             outlier_share = np.mean(new < 0)
-            # 6. New clusters from the unexplained correspondences.
-            scale = float(np.median(models.sigmas)) if len(kept) else sigma_floor
+            # 7. New clusters from the unexplained correspondences.
+            scale = float(models.sigmas[0]) if len(kept) else sigma_floor
             found = propose_clusters(
                 a,
                 b,
@@ -195,6 +203,7 @@ def robust_multi_model_em(
                 n,
                 rng,
                 log_volume_density=log_volume_density,
+                models=models,
                 min_cluster_size=min_cluster_size,
                 sigma_floor=sigma_floor,
                 noise_scale=noise_scale,
@@ -204,10 +213,15 @@ def robust_multi_model_em(
             for members in found:
                 new[members] = len(kept)
                 kept = np.append(kept, -1)
+            # A proposal along another cluster's boundary is bled flow too.
+            layers = boundary_layers(a, new, len(kept), spacing)
+            found = [f for k, f in enumerate(found) if len(models.sigmas) + k not in layers]
+            new[np.isin(new, layers[layers >= len(models.sigmas)])] = -1
             step = {
                 "iteration": n_iter,
                 "clusters": int(len(kept)),
                 "merges": int(n_merges),
+                "bled": len(bled),
                 "dropped": int(np.count_nonzero((counts > 0) & (counts < min_cluster_size))),
                 "outliers": int(np.count_nonzero(new < 0)),
                 "proposed": len(found),
@@ -225,7 +239,8 @@ def robust_multi_model_em(
             if n_changed <= tol * n and not n_merges and not found:
                 converged = True
                 break
-    # Final clean-up: no cluster below m_min; clusters numbered by size.
+    # Final clean-up: no boundary layer and no cluster below m_min; numbered by size.
+    labels = np.where(np.isin(labels, boundary_layers(a, labels, n_clusters, spacing)), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
     labels, kept = drop_small_clusters(labels, counts, min_cluster_size)
     n_clusters = len(kept)

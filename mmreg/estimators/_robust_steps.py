@@ -24,16 +24,19 @@ from scipy.stats import binom, chi2
 from mmreg._connectivity import tau_components
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg._moments import Moments, group_moments
+from mmreg._neighbors import nearest_in_other_component
 
 __all__ = [
     "ClusterModels",
     "adjacent_pairs",
     "assign_correspondences",
+    "boundary_layers",
     "drop_small_clusters",
     "estimate_range_growth",
     "fit_clusters",
     "log_uniform_density",
     "merge_adjacent",
+    "pool_sigmas",
     "propose_clusters",
     "range_noise_scale",
     "reject_outliers",
@@ -125,8 +128,8 @@ def range_noise_scale(a, growth):
 def estimate_range_growth(a, squared, labels, n_clusters, sigma_floor, *, n_grid=25):
     """Maximum-likelihood ``growth`` of :func:`range_noise_scale` for the clusters given.
 
-    Each cluster keeps its own ``sigma_j``; ``growth`` is shared (a property of the
-    sensor). The likelihood of the residuals ``squared`` (``r_i^2``, of the clustered
+    The noise scale ``sigma`` is shared by the clusters, like ``growth`` (both are the
+    sensor's). The likelihood of the residuals ``squared`` (``r_i^2``, of the clustered
     correspondences) is maximised over 0 and a logarithmic grid of ``n_grid`` values
     around ``1 / median(||a||^2)``, ``sigma_j`` profiled out in closed form; a growth
     above 0 must raise it by more than the BIC price of one parameter.
@@ -140,7 +143,9 @@ def estimate_range_growth(a, squared, labels, n_clusters, sigma_floor, *, n_grid
     if typical <= 0:
         return 0.0
     grid = np.concatenate([[0.0], np.logspace(-3, 3, n_grid) / typical])
-    j = labels[rows]
+    # One noise scale for all clusters (see pool_sigmas).
+    j = np.zeros(len(rows), dtype=np.intp)
+    n_clusters = 1
     sizes = np.bincount(j, minlength=n_clusters)
     floor2 = sigma_floor**2
     log_like = np.empty(len(grid))
@@ -156,18 +161,20 @@ def estimate_range_growth(a, squared, labels, n_clusters, sigma_floor, *, n_grid
     return float(grid[best])
 
 
-def _group_medians(values, labels, n_groups):
-    """Median of ``values`` within each group (NaN for empty groups)."""
-    order = np.lexsort((values, labels))
-    sorted_values = values[order]
-    counts = np.bincount(labels, minlength=n_groups)[:n_groups]
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    medians = np.full(n_groups, np.nan)
-    full = counts > 0
-    low = starts[full] + (counts[full] - 1) // 2
-    high = starts[full] + counts[full] // 2
-    medians[full] = 0.5 * (sorted_values[low] + sorted_values[high])
-    return medians
+def pool_sigmas(models, d, sigma_floor):
+    """Give every cluster the pooled noise scale of all of them, in place; return it.
+
+    The noise of scene flow is the sensor's and the flow network's, not the object's: one
+    scale ``sigma`` (times each correspondence's ``g_i``) for all clusters, estimated
+    without bias from all their residuals. A cluster of wrong correspondences cannot
+    pass itself off as an object with a large noise of its own.
+    """
+    sizes = models.moments.size
+    dof = d * np.sum(sizes) - motion_parameters(d) * np.count_nonzero(sizes)
+    sigma = float(np.sqrt(np.sum(models.squared_error) / dof)) if dof > 0 else sigma_floor
+    sigma = max(sigma, sigma_floor) if np.isfinite(sigma) else sigma_floor
+    models.sigmas = np.full(len(sizes), sigma)
+    return sigma
 
 
 def trimmed_fit(
@@ -175,12 +182,13 @@ def trimmed_fit(
 ):
     """M-step on inliers: fit, drop residuals beyond a robust scale, refit.
 
-    Each round fits every cluster's motion on its current inliers, estimates its noise
-    scale robustly (``sigma^2 = median(r^2 / g^2) / median(chi2_d)``, valid with up to
-    half of the cluster wrong) and keeps as inliers the members whose normalised squared
-    residual is within the ``confidence`` quantile of ``sigma^2 chi2_d``. One round is
-    enough when the E-step runs in between: it has already left out the wrong
-    correspondences of the last iteration.
+    Each round fits every cluster's motion on its current inliers, estimates the noise
+    scale robustly from all members (``sigma^2 = median(r^2 / g^2) / median(chi2_d)``,
+    valid with up to half of the correspondences wrong) and keeps as inliers the members
+    whose normalised squared residual is within the ``confidence`` quantile of
+    ``sigma^2 chi2_d``. One round is enough when the E-step runs in between: it has
+    already left out the wrong correspondences of the last iteration. The clusters
+    share one noise scale (:func:`pool_sigmas`).
 
     Returns
     -------
@@ -198,11 +206,12 @@ def trimmed_fit(
     for _ in range(rounds):
         models = fit_clusters(a, b, inliers, n_clusters, sigma_floor, noise_scale)
         sq = squared_residuals(a, b, labels, models.rotations, models.translations) / g2
-        scale2 = _group_medians(sq[member], labels[member], n_clusters) / median_chi2
-        scale2 = np.maximum(np.nan_to_num(scale2, nan=0.0), sigma_floor**2)
-        keep = member & (sq <= limit * np.append(scale2, np.inf)[labels])
+        scale2 = np.median(sq[member]) / median_chi2 if member.any() else 0.0
+        keep = member & (sq <= limit * max(scale2, sigma_floor**2))
         inliers = np.where(keep, labels, -1)
-    return inliers, fit_clusters(a, b, inliers, n_clusters, sigma_floor, noise_scale)
+    models = fit_clusters(a, b, inliers, n_clusters, sigma_floor, noise_scale)
+    pool_sigmas(models, d, sigma_floor)
+    return inliers, models
 
 
 def log_uniform_density(b):
@@ -346,7 +355,7 @@ def _merge_ratio(models, pairs, d):
     rotations, translations = (mi.scaled(inv_i) + mj.scaled(inv_j)).fit()
     excess = (mi.squared_error(rotations, translations) - models.squared_error[i]) * inv_i
     excess += (mj.squared_error(rotations, translations) - models.squared_error[j]) * inv_j
-    price = motion_parameters(d) * np.log(mi.count + mj.count)
+    price = motion_parameters(d) * np.log(np.maximum(mi.size + mj.size, 2))
     return np.maximum(excess, 0.0) / price
 
 
@@ -387,6 +396,7 @@ def merge_adjacent(models, pairs, d, sigma_floor):
         keep, gone = pairs[chosen, 0], pairs[chosen, 1]
         merged = models.moments.take(keep) + models.moments.take(gone)
         refit = _models_from_moments(merged, d, sigma_floor)
+        refit.sigmas[:] = models.sigmas[keep]  # the shared noise scale
         for name in ("rotations", "translations", "sigmas", "squared_error"):
             getattr(models, name)[keep] = getattr(refit, name)
         for name, value in vars(merged).items():
@@ -423,6 +433,76 @@ def _local_samples(points, n_samples, size, rng):
     return np.column_stack([seeds, picks])
 
 
+def _explains_its_surroundings(points, inliers):
+    """Whether ``inliers`` are most of the unexplained ``points`` around them.
+
+    Around means within twice the median spacing of the inliers. A new motion of an
+    object explains most of the unexplained correspondences where the object is; wrong
+    flows that a few correspondences happen to share leave most of those around them
+    unexplained.
+    """
+    tree = cKDTree(points[inliers])
+    spacing, _ = tree.query(points[inliers], k=2)
+    radius = 2.0 * float(np.median(spacing[:, 1]))
+    distance, _ = tree.query(points, k=1, distance_upper_bound=np.nextafter(radius, np.inf))
+    return 2 * len(inliers) > np.count_nonzero(distance <= radius)
+
+
+def _concatenate_moments(first, second):
+    return Moments(
+        *(
+            np.concatenate([x, y])
+            for x, y in zip(vars(first).values(), vars(second).values(), strict=True)
+        )
+    )
+
+
+def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0):
+    """Clusters that are all boundary: a layer along another cluster, no interior.
+
+    Scene-flow networks smear the flow of one surface over the pixels next to it, so
+    along every silhouette a band of correspondences a pixel or two wide takes the motion
+    of whatever lies beside it in the image (metres away in depth), and so do the blobs
+    of wrong flow inside a surface. Either forms a cluster whose points lie within a few
+    sampling spacings of another cluster's points: its median distance to the nearest
+    point of another cluster is at most ``thickness`` times its median ``spacing`` (the
+    distance from each point to its nearest neighbour). An object, however small or
+    thin, has most of its points away from what it touches.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    labels : ndarray of shape (n,)
+    n_clusters : int
+    spacing : ndarray of shape (n,)
+        Distance from each point to its nearest neighbour among all points.
+    thickness : float, default=3.0
+
+    Returns
+    -------
+    clusters : ndarray
+        Indices of the clusters that are boundary layers.
+    """
+    rows = np.flatnonzero(labels >= 0)
+    if n_clusters < 2 or not len(rows):
+        return np.empty(0, dtype=np.intp)
+    own = labels[rows]
+    bound = thickness * float(np.max(spacing[rows]))
+    source, target, distance = nearest_in_other_component(points[rows], own, max_distance=bound)
+    gap = np.full(len(rows), np.inf)
+    gap[source] = distance
+    order = np.lexsort((gap, own))
+    counts = np.bincount(own, minlength=n_clusters)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    full = np.flatnonzero(counts > 0)
+    median_gap = np.full(n_clusters, np.inf)
+    median_gap[full] = gap[order][starts[full] + (counts[full] - 1) // 2]
+    typical = np.zeros(n_clusters)
+    spacing_order = np.lexsort((spacing[rows], own))
+    typical[full] = spacing[rows][spacing_order][starts[full] + (counts[full] - 1) // 2]
+    return np.flatnonzero(median_gap <= thickness * typical)
+
+
 def drop_small_clusters(labels, counts, min_cluster_size):
     """Labels with the clusters below ``min_cluster_size`` dissolved (-1), renumbered."""
     kept = counts >= min_cluster_size
@@ -442,6 +522,7 @@ def propose_clusters(
     rng,
     *,
     log_volume_density,
+    models,
     min_cluster_size,
     sigma_floor,
     noise_scale=None,
@@ -462,7 +543,11 @@ def propose_clusters(
     ``N_tests P(Binomial(m - 3, p) >= k - 3)`` of ``k`` inliers among ``m`` must stay
     below 1, ``N_tests`` counting every hypothesis drawn (the a-contrario test of
     AC-RANSAC, Moisan and Stival 2004). Wrong correspondences that agree on no motion
-    never form a cluster.
+    never form a cluster. Nor does a motion that one of the ``models`` (the current
+    clusters) already has, by the merge test of :func:`merge_adjacent`: a proposal must
+    bring a new motion. Points that move like a cluster beyond the gate are flow that
+    bled across an object's silhouette far more often than another object: separate
+    objects that move alike come from the initial clusters, as eq. (7) intends.
 
     Returns
     -------
@@ -496,11 +581,11 @@ def propose_clusters(
         sq = np.einsum("hni,hni->hn", pb[None] - moved, pb[None] - moved) / g**2
         best = int(np.argmax((sq <= limit).sum(axis=1)))
         inliers = np.flatnonzero(sq[best] <= limit)
-        if len(inliers) < min_cluster_size:
+        if len(inliers) < min_cluster_size or not _explains_its_surroundings(pa, inliers):
             continue
         one = np.zeros(len(inliers), dtype=np.intp)
         model = fit_clusters(pa[inliers], pb[inliers], one, 1, sigma_floor, g[inliers])
-        sigma = float(model.sigmas[0])
+        model.sigmas[:] = sigma = scale  # the shared noise scale
         log_like = -0.5 * model.squared_error[0] / sigma**2 - d * np.sum(
             np.log(sigma * g[inliers]) + 0.5 * _LOG_2PI
         )
@@ -510,6 +595,20 @@ def propose_clusters(
         radius = np.sqrt(limit) * float(np.median(g[inliers]))
         chance = min(1.0, unit_ball * radius**d * np.exp(log_volume_density))
         tail = binom.sf(len(inliers) - size - 1, len(members) - size, chance)
-        if n_tests * tail < 1.0:
-            accepted.append(members[inliers])
+        if n_tests * tail >= 1.0:
+            continue
+        if len(models.sigmas):
+            both = ClusterModels(
+                *(
+                    np.concatenate([getattr(models, name), getattr(model, name)])
+                    for name in ("rotations", "translations", "sigmas")
+                ),
+                _concatenate_moments(models.moments, model.moments),
+                np.concatenate([models.squared_error, model.squared_error]),
+            )
+            k = len(models.sigmas)
+            pairs = np.column_stack([np.arange(k), np.full(k, k)])
+            if np.any(_merge_ratio(both, pairs, d) < 1.0):
+                continue
+        accepted.append(members[inliers])
     return accepted
