@@ -145,12 +145,20 @@ def paper_scene():
 def paper_methods(scene, init, quick):
     """Every estimator of the package on the paper-scale scene: (name, factory) pairs."""
     methods = [
-        ("EM, gate tau=1.5 (MultiModelRegistration)", lambda: MultiModelRegistration(init=init)),
         (
-            "EM, no gate (MultiModelRegistration tau=None)",
-            lambda: MultiModelRegistration(tau=None, init=init),
+            "Algorithm 1, gate tau=1.5 (variant='paper')",
+            lambda: MultiModelRegistration(init=init, variant="paper"),
         ),
-        ("EM with its Euclidean init (MultiModelRegistration())", MultiModelRegistration),
+        (
+            "Algorithm 1, no gate (variant='paper', tau=None)",
+            lambda: MultiModelRegistration(tau=None, init=init, variant="paper"),
+        ),
+        (
+            "Algorithm 1 with its Euclidean init (variant='paper')",
+            lambda: MultiModelRegistration(variant="paper"),
+        ),
+        ("Robust default, gate tau=1.5", lambda: MultiModelRegistration(init=init)),
+        ("Robust default with its Euclidean init", MultiModelRegistration),
     ]
     try:
         from mmreg.baselines import NaiveRegistration, SequentialRANSAC, TLinkage

@@ -75,8 +75,8 @@ def test_gross_error_fraction_matches(fraction, blob_fraction):
     )  # fmt: skip
     assert abs(out.outlier_mask.mean() - fraction) < 0.01
     error = np.linalg.norm(out.flow - flow, axis=1)
-    # Offsets of magnitude 2 * U(0.5, 1.5), 0.7-1.3 times that in blobs; the rest untouched.
-    assert np.all(error[out.outlier_mask] > 0.6) and np.all(error[out.outlier_mask] < 4.0)
+    # Offsets of magnitude 2 * U(0.5, 1.5), sqrt(2) times that in blobs; the rest untouched.
+    assert np.all(error[out.outlier_mask] > 0.9) and np.all(error[out.outlier_mask] < 4.3)
     assert np.array_equal(out.flow[~out.outlier_mask], flow[~out.outlier_mask])
 
 
@@ -109,7 +109,8 @@ def test_blobs_are_spatially_coherent():
         cosines[blob_fraction] = np.median(np.sum(errors * errors[nearest[:, 1]], axis=1))
     # Within a blob, no two errors are equal: no rigid motion hides in it.
     assert len(np.unique(np.round(errors, 9), axis=0)) == len(errors)
-    assert cosines[1.0] > 0.7 and abs(cosines[0.0]) < 0.3
+    # Two members of one blob: errors at 45 degrees to the mean, so cosines near 0.5.
+    assert cosines[1.0] > 0.35 and abs(cosines[0.0]) < 0.2
     # Chance level is the outlier fraction, 0.1: isolated errors sit near it, blobs far above.
     assert shares[0.0] < 0.25
     assert shares[1.0] > 0.6

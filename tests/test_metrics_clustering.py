@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from sklearn.metrics import adjusted_rand_score as sklearn_ari
 
-from mmreg.metrics import adjusted_rand_score, iou_score, misclassification_error
+from mmreg.metrics import adjusted_rand_score, iou_score, misclassification_error, objects_found
 
 
 def brute_force_iou(labels_true, labels_pred):
@@ -203,3 +203,26 @@ def test_bad_labels_raise(metric, labels_true, labels_pred, error, match):
 
 def test_integer_valued_floats_are_accepted():
     assert iou_score([0.0, 0.0, 1.0], [1, 1, 0]) == 1.0
+
+
+def test_objects_found_against_a_brute_force_count():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        truth = rng.integers(-1, 4, 60)
+        pred = rng.integers(-1, 5, 60)
+        expected = []
+        for k in np.unique(truth[truth >= 0]):
+            g = truth == k
+            ious = [(g & (pred == j)).sum() / (g | (pred == j)).sum() for j in range(5)]
+            expected.append(max(ious) >= 0.5)
+        assert objects_found(truth, pred) == pytest.approx(np.mean(expected))
+
+
+def test_objects_found_counts_the_objects_asked_for():
+    truth = np.repeat([0, 1, 2], [80, 10, 10])
+    one_cluster = np.zeros(100, dtype=int)
+    # The paper's IoU rewards one big cluster; no moving object is found in it.
+    assert iou_score(truth, one_cluster) == pytest.approx(0.8)
+    assert objects_found(truth, one_cluster, objects=[1, 2]) == 0.0
+    assert objects_found(truth, truth, objects=[1, 2]) == 1.0
+    assert np.isnan(objects_found(truth, truth, objects=[]))

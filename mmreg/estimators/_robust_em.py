@@ -240,7 +240,10 @@ def robust_multi_model_em(
                 converged = True
                 break
     # Final clean-up: no boundary layer and no cluster below m_min; numbered by size.
-    labels = np.where(np.isin(labels, boundary_layers(a, labels, n_clusters, spacing)), -1, labels)
+    # With max_iter=0 the initial clusters are returned as given (the paper's contract).
+    if n_iter:
+        bled = boundary_layers(a, labels, n_clusters, spacing)
+        labels = np.where(np.isin(labels, bled), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
     labels, kept = drop_small_clusters(labels, counts, min_cluster_size)
     n_clusters = len(kept)

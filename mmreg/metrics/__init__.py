@@ -5,6 +5,8 @@ translations)`` of shapes ``(K, d, d)`` and ``(K, d)``:
 
 * :func:`iou_score` (higher is better), :func:`per_point_error`, :func:`rotation_error`
   and :func:`translation_error` (lower is better), exactly as the paper defines them;
+* :func:`objects_found`: the share of (moving) objects some cluster recovers, which
+  the paper's IoU hides (one cluster holding a whole street scores high on it);
 * :func:`misclassification_error` (Hungarian matching) and
   :func:`~sklearn.metrics.adjusted_rand_score`, the usual clustering view;
 * :func:`ground_truth_poses`: true motions by Horn's method on the true clusters;
@@ -16,6 +18,7 @@ from sklearn.metrics import adjusted_rand_score
 
 from mmreg.metrics._clustering import iou_score, misclassification_error
 from mmreg.metrics._evaluate import evaluate
+from mmreg.metrics._objects import objects_found
 from mmreg.metrics._point import chamfer_distance, per_point_error
 from mmreg.metrics._pose import ground_truth_poses, rotation_error, translation_error
 from mmreg.metrics._scorer import (
@@ -39,6 +42,7 @@ __all__ = [
     "make_rotation_error_scorer",
     "make_translation_error_scorer",
     "misclassification_error",
+    "objects_found",
     "per_point_error",
     "registration_scorers",
     "rotation_error",
