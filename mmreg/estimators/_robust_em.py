@@ -63,6 +63,21 @@ def _range_noise(a, b, labels, models, sigma_floor):
     return growth, (range_noise_scale(a, growth) if growth > 0 else None)
 
 
+def _sampling_spacing(points, k=6):
+    """The local sampling spacing at each point: the median nearest-neighbour distance
+    of its ``k`` nearest points (itself included).
+
+    Smoothed so that a few points that happen to lie close together (random subsampling
+    makes such clumps) are not read as a surface of their own, denser than the one
+    around them.
+    """
+    n = len(points)
+    if n < 2:
+        return np.zeros(n)
+    distance, index = cKDTree(points).query(points, k=min(k, n))
+    return np.median(distance[:, 1][index], axis=1)
+
+
 def _weights(counts, n):
     return np.asarray(counts, dtype=float) / max(n, 1)
 
@@ -124,8 +139,7 @@ def robust_multi_model_em(
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(b)
     order = morton_order(np.ascontiguousarray(a.T))
-    # Each a-point's nearest neighbour: the local sampling density.
-    spacing = cKDTree(a).query(a, k=2)[0][:, -1] if n > 1 else np.zeros(n)
+    spacing = _sampling_spacing(a)
     history = []
     converged = False
     n_iter = 0
@@ -241,7 +255,17 @@ def robust_multi_model_em(
                 break
     # Final clean-up: no boundary layer and no cluster below m_min; numbered by size.
     # With max_iter=0 the initial clusters are returned as given (the paper's contract).
-    if n_iter:
+    if n_iter and n_clusters:
+        # The last E-step can leave a few correspondences of a shrunk cluster behind, in a
+        # cluster of their own with their neighbour's motion: one more merge pass.
+        inliers, models = trimmed_fit(
+            a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
+        )
+        pairs = adjacent_pairs(a, inliers, n_clusters, tau)
+        root, _, _ = merge_adjacent(models, pairs, d, sigma_floor)
+        labels, n_clusters = _compact_initial(
+            np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
+        )
         bled = boundary_layers(a, labels, n_clusters, spacing)
         labels = np.where(np.isin(labels, bled), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
