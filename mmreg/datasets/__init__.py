@@ -6,17 +6,29 @@ and is seeded by ``random_state``.
 
 from mmreg.datasets._flow_noise import corrupt_scene_flow
 from mmreg.datasets._flying_things import PRIMITIVES, make_flying_things
+from mmreg.datasets._flying_things_data import load_flying_things
+from mmreg.datasets._kitti import load_kitti_scene_flow
+from mmreg.datasets._meshes import MESH_NAMES, load_mesh_points
+from mmreg.datasets._pfm import read_pfm, write_pfm
 from mmreg.datasets._sam import simulate_sam_masks
 from mmreg.datasets._scene import SHAPES, make_scene
 from mmreg.datasets._street import SURFACE_KINDS, make_street
+from mmreg.io import read_correspondences as load_correspondences
 
 __all__ = [
+    "MESH_NAMES",
     "PRIMITIVES",
     "SHAPES",
     "SURFACE_KINDS",
     "corrupt_scene_flow",
+    "load_correspondences",
+    "load_flying_things",
+    "load_kitti_scene_flow",
+    "load_mesh_points",
     "make_flying_things",
     "make_scene",
     "make_street",
+    "read_pfm",
     "simulate_sam_masks",
+    "write_pfm",
 ]
