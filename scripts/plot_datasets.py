@@ -87,7 +87,13 @@ def _image_axes(ax, camera, title):
 
 def plot_scene(out, seed):
     scene = make_scene(
-        n_objects=7, n_points=22395, noise=0.01, outlier_fraction=0.05, random_state=seed
+        n_objects=7,
+        n_points=22395,
+        noise=0.03,
+        outlier_fraction=0.05,
+        object_size=3.0,
+        shapes="meshes",
+        random_state=seed,
     )
     rng = np.random.RandomState(seed)
     colours = _colours(scene.labels.max() + 2, rng)[1:]
@@ -102,7 +108,8 @@ def plot_scene(out, seed):
         ax.set_title(title, fontsize=10)
         ax.set_box_aspect(np.ptp(scene.a, axis=0))
     fig.suptitle(
-        "make_scene: 7 sampled primitives, 22,395 correspondences, noise 0.01, 5 % outliers "
+        "make_scene(shapes='meshes'): 7 real meshes 3 m across, 22,395 correspondences, "
+        "noise 0.03 m, 5 % outliers "
         "(no image, so no masks)",
         fontsize=10,
     )
