@@ -1,0 +1,351 @@
+"""``mmreg register``: find the moving objects in a file of correspondences."""
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mmreg._cli._common import (
+    CLIError,
+    Steps,
+    check_correspondences,
+    check_labels,
+    format_table,
+    plural,
+    reading,
+    render_png,
+    reported_warnings,
+    result_figure,
+    summarize,
+    write_result_dir,
+)
+
+NAME = "register"
+HELP = "find the moving objects, their motions and the outliers in correspondences"
+DESCRIPTION = """\
+Find every rigidly moving object in putative correspondences (a_i, b_i) between two
+point clouds, with MultiModelRegistration, and write the result into a directory.
+
+INPUT is one of
+  - an (n, 6) array [a | b] in .npy, .npz, .csv or .txt (one correspondence per row:
+    a_x a_y a_z b_x b_y b_z);
+  - a point cloud of the a-points (.ply, .pcd, .xyz) with --target (the b-points, one per
+    a-point in the same order: a cloud or an (n, 3) array) or --flow (an (n, 3) .npy of
+    scene flow, b = a + flow).
+
+--init gives the initial clusters: "euclidean" (Euclidean clustering into --clusters
+clusters, the default), "dbscan", a file of labels (.npy, .csv or .txt: one integer per
+correspondence, negative for none) or a masks file (.npz with arrays "masks", an
+(m, H, W) boolean stack or an H x W integer label image, negative for none, e.g.
+SegmentAnything's masks of the first image, and "pixels", the (n, 2) integer (column, row)
+of each a-point in that image).
+
+Written into --out: labels.npy (cluster of every correspondence, -1 for outliers),
+motions.json (per cluster: label, 4x4 transform with b = R a + t, rotation, translation,
+rotation_angle_deg, sigma, size, moving), summary.csv (one row per cluster), clusters.ply
+(a-points coloured by cluster, outliers grey), result.png, X.npy (the correspondences) and
+run.json (input, options, timings). The directory is written whole or not at all.
+
+The largest cluster is taken for the background (the static world when the camera moves);
+a cluster is "moving" when the background's motion would carry its a-points, on average,
+more than 3 times its RMS residual away from where its own motion takes them
+(summary.csv: displacement_vs_background, rms_residual).
+"""
+EPILOG = """\
+examples:
+  mmreg register pairs.npy --out result
+  mmreg register frame0.ply --target frame1.ply --init masks.npz --out result
+  mmreg register frame0.ply --flow flow.npy --tau 1.0 -v
+"""
+
+
+def _tau(text):
+    if text.lower() == "none":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive number or 'none'; got {text!r}"
+        ) from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be positive; got {text!r}")
+    return value
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer; got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1; got {value}")
+    return value
+
+
+def _count(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer; got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be at least 0; got {value}")
+    return value
+
+
+CLOUD_EXTENSIONS = (".ply", ".pcd", ".xyz")
+VIEWS = ("auto", "street", "3d", "top", "bev", "camera")
+
+
+def add_arguments(parser):
+    parser.add_argument("input", metavar="INPUT", help="correspondences, or the a-point cloud")
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument(
+        "--target", metavar="B", help="b-points, one per a-point (.ply/.pcd/.xyz or (n, 3) .npy)"
+    )
+    source.add_argument("--flow", metavar="F.npy", help="scene flow, (n, 3): b = a + flow")
+    parser.add_argument(
+        "--init",
+        default="euclidean",
+        metavar="INIT",
+        help="euclidean, dbscan, LABELS (.npy/.csv/.txt) or MASKS.npz (masks + pixels)",
+    )
+    parser.add_argument(
+        "--clusters",
+        type=_positive_int,
+        default=100,
+        help="number of initial clusters of --init euclidean",
+    )
+    parser.add_argument(
+        "--tau",
+        type=_tau,
+        default=1.5,
+        help="distance gate in the units of the points (metres); 'none' turns it off",
+    )
+    parser.add_argument(
+        "--min-cluster-size", type=_positive_int, default=4, help="smallest cluster kept"
+    )
+    parser.add_argument("--max-iter", type=_count, default=10, help="most EM iterations")
+    parser.add_argument(
+        "--paper",
+        action="store_true",
+        help="the paper's Algorithm 1 exactly (variant='paper') instead of the robust variant",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        help="result directory (default: INPUT's name + '-mmreg', in the current directory)",
+    )
+    parser.add_argument(
+        "--view",
+        choices=VIEWS,
+        default="auto",
+        help="result.png: 'street' (camera and bird's-eye views, for points in a camera "
+        "frame: x right, y down, z forward) or one plotting view; 'auto': street when "
+        "every a-point has z > 0, else 3d",
+    )
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no table")
+    parser.add_argument(
+        "--verbose", "-v", action="count", default=0, help="print the EM's iterations"
+    )
+
+
+def read_input(args):
+    """The (n, 6) correspondences of INPUT (with --target or --flow)."""
+    from mmreg import io as mmio
+
+    cloud = Path(args.input).suffix.lower() in CLOUD_EXTENSIONS
+    other = "--target" if args.target is not None else "--flow" if args.flow is not None else None
+    if cloud and other is None and Path(args.input).exists():
+        raise CLIError(
+            f"{args.input}: a point cloud holds only the a-points; give the b-points with "
+            "--target B or the scene flow with --flow F.npy"
+        )
+    if not cloud and other is not None:
+        raise CLIError(
+            f"{args.input}: {other} applies to a point cloud (.ply, .pcd, .xyz) of a-points; "
+            "this file already holds both a and b"
+        )
+    with reading(args.input, args.target, args.flow):
+        X = mmio.read_correspondences(args.input, target=args.target, flow=args.flow)
+    X = check_correspondences(X, args.input)
+    if len(X) < args.min_cluster_size:
+        raise CLIError(
+            f"{args.input}: {len(X)} correspondences, fewer than --min-cluster-size "
+            f"{args.min_cluster_size}: no cluster is possible"
+        )
+    return X
+
+
+def read_masks(path, n):
+    """PrecomputedMasks from an .npz holding ``masks`` and ``pixels``."""
+    from mmreg.init import PrecomputedMasks
+
+    with reading(path):
+        with np.load(path, allow_pickle=False) as data:
+            names = list(data.keys())
+            missing = [k for k in ("masks", "pixels") if k not in names]
+            if missing:
+                raise CLIError(
+                    f"{path}: a masks file needs arrays 'masks' and 'pixels'; it holds {names}"
+                )
+            masks, pixels = data["masks"], data["pixels"]
+        if masks.ndim not in (2, 3):
+            raise CLIError(
+                f"{path}: 'masks' must be an (m, H, W) boolean stack or an H x W label image; "
+                f"got shape {masks.shape}"
+            )
+        if pixels.ndim != 2 or pixels.shape[1] != 2:
+            raise CLIError(f"{path}: 'pixels' must have shape (n, 2); got {pixels.shape}")
+        if len(pixels) != n:
+            raise CLIError(f"{path}: {len(pixels)} pixels for {n} correspondences")
+        return PrecomputedMasks(masks, pixels)
+
+
+def make_init(args, n):
+    """The ``init`` of the estimator: an initialiser or an array of labels."""
+    from mmreg import io as mmio
+    from mmreg.init import DBSCANClustering, EuclideanClustering
+
+    if args.init == "euclidean":
+        return EuclideanClustering(n_clusters=args.clusters)
+    if args.init == "dbscan":
+        return DBSCANClustering()
+    path = Path(args.init)
+    if path.suffix.lower() == ".npz":
+        return read_masks(path, n)
+    if not path.exists():
+        raise CLIError(f"{path}: no such file (--init takes euclidean, dbscan or a file)")
+    with reading(path):
+        labels = mmio.read_labels(path)
+    return check_labels(labels, n, path)
+
+
+def _fit(X, init, args, steps):
+    from mmreg import MultiModelRegistration
+    from mmreg.init import initial_labels
+
+    with steps.step("initial clusters"), reading(args.init), reported_warnings():
+        labels = initial_labels(init, X, random_state=args.seed)
+    estimator = MultiModelRegistration(
+        tau=args.tau,
+        min_cluster_size=args.min_cluster_size,
+        max_iter=args.max_iter,
+        init=labels,
+        variant="paper" if args.paper else "robust",
+        random_state=args.seed,
+        verbose=args.verbose,
+    )
+    with steps.step("EM"), reported_warnings():
+        estimator.fit(X)
+    return estimator, int(labels.max(initial=-1)) + 1
+
+
+def register(
+    X, init, args, *, input_name, steps, extra_run=None, extra_files=None, title=None, camera=None
+):
+    """Fit, summarise, draw and write the result directory ``args.out`` (if not None).
+
+    ``title`` (of the picture) may hold ``{found}``: the numbers of clusters, moving
+    clusters and outliers.
+
+    Returns ``(estimator, summary, fit_seconds, n_initial_clusters)``.
+    """
+    start = time.perf_counter()
+    estimator, n_initial = _fit(X, init, args, steps)
+    elapsed = time.perf_counter() - start
+    with steps.step("summary and picture"):
+        summary = summarize(
+            X, estimator.labels_, estimator.rotations_, estimator.translations_, estimator.sigmas_
+        )
+        motions = (estimator.rotations_, estimator.translations_)
+        n_moving = int(summary["moving"].sum())
+        found = (
+            f"{plural(estimator.n_clusters_, 'cluster')} ({n_moving} moving), "
+            f"{int(estimator.outlier_mask_.sum()):,} outliers"
+        )
+        if title is None:
+            title = f"mmreg register {input_name}: {len(X):,} correspondences -> {found}"
+        else:
+            title = title.format(found=found)
+        png = None
+        if args.out is not None:
+            figure = result_figure(
+                X,
+                estimator.labels_,
+                motions,
+                moving=summary["moving"].to_numpy(),
+                view=args.view,
+                title=title,
+                camera=camera,
+            )
+            png = render_png(figure)
+    if args.out is not None:
+        run = {
+            "input": input_name,
+            "target": getattr(args, "target", None),
+            "flow": getattr(args, "flow", None),
+            "init": str(args.init),
+            "initial_clusters": n_initial,
+            "estimator": estimator.get_params(deep=False) | {"init": str(args.init)},
+            "n_correspondences": len(X),
+            "n_clusters": estimator.n_clusters_,
+            "n_moving": n_moving,
+            "n_outliers": int(estimator.outlier_mask_.sum()),
+            "n_iter": estimator.n_iter_,
+            "converged": bool(estimator.converged_),
+            "fit_seconds": round(elapsed, 3),
+        } | (extra_run or {})
+        if camera is not None:  # for "mmreg view": the camera view in pixels
+            run["camera"] = {k: camera[k] for k in ("fx", "fy", "cx", "cy", "width", "height")}
+        with steps.step(f"writing {args.out}"):
+            write_result_dir(
+                args.out,
+                X,
+                estimator.labels_,
+                estimator.rotations_,
+                estimator.translations_,
+                estimator.sigmas_,
+                summary,
+                png,
+                run,
+                extra_files,
+            )
+    return estimator, summary, elapsed, n_initial
+
+
+# The table printed: (column of the summary, header, format).
+TABLE = [
+    ("label", "cluster", ""),
+    ("size", "points", ",d"),
+    ("rotation_angle_deg", "rotation [deg]", ".3f"),
+    ("translation_norm", "translation", ".3f"),
+    ("rms_residual", "RMS residual", ".3g"),
+    ("displacement_vs_background", "vs background", ".3f"),
+    ("moving", "moving", ""),
+]
+
+
+def run(args):
+    if args.out is None:
+        args.out = f"{Path(args.input).stem}-mmreg"
+    with Steps(5, quiet=args.quiet) as steps:
+        with steps.step(f"reading {args.input}"):
+            X = read_input(args)
+            init = make_init(args, len(X))
+        estimator, summary, elapsed, _ = register(X, init, args, input_name=args.input, steps=steps)
+    if not args.quiet:
+        moving = summary["moving"].map({True: "yes", False: "no"})
+        table = summary.assign(moving=moving.where(~summary["background"], "background"))
+        print(
+            f"{len(X):,} correspondences: {plural(estimator.n_clusters_, 'cluster')}, "
+            f"{plural(int(estimator.outlier_mask_.sum()), 'outlier')}, "
+            f"{plural(estimator.n_iter_, 'iteration')}, "
+            f"{elapsed:.2f} s"
+        )
+        print(format_table(table, TABLE))
+        print(f"written: {args.out}/ (labels.npy motions.json summary.csv clusters.ply result.png)")
+    return 0

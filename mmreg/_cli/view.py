@@ -1,0 +1,94 @@
+"""``mmreg view``: redraw the picture of a result directory."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from mmreg._cli._common import (
+    CLIError,
+    check_correspondences,
+    check_labels,
+    plural,
+    reading,
+    render_png,
+    result_figure,
+)
+from mmreg._cli.register import VIEWS
+
+NAME = "view"
+HELP = "redraw the picture of a result directory"
+DESCRIPTION = """\
+Redraw the picture of a result directory (of "mmreg register" or "mmreg demo --out") from
+its X.npy, labels.npy and motions.json: the a-points coloured by cluster (the largest, the
+background, in sand; outliers small and grey) and an arrow per cluster for its motion.
+Written to --out, by default RESULT_DIR/result.png (replacing it).
+"""
+
+
+def add_arguments(parser):
+    parser.add_argument("result_dir", metavar="RESULT_DIR", help="a result directory")
+    parser.add_argument(
+        "--out",
+        metavar="PNG",
+        default=None,
+        help="picture to write (default: RESULT_DIR/result.png)",
+    )
+    parser.add_argument(
+        "--view",
+        choices=VIEWS,
+        default="auto",
+        help="'street' (camera and bird's-eye views) or one plotting view; 'auto': street "
+        "when every a-point has z > 0, else 3d",
+    )
+    parser.add_argument("--title", default=None, help="title of the picture")
+    parser.add_argument("--dpi", type=int, default=110, help="resolution of the PNG")
+
+
+def run(args):
+    from mmreg import io as mmio
+
+    folder = Path(args.result_dir)
+    if not folder.is_dir():
+        raise CLIError(f"{folder}: not a result directory (no such directory)")
+    paths = {name: folder / name for name in ("X.npy", "labels.npy", "motions.json")}
+    for path in paths.values():
+        if not path.exists():
+            raise CLIError(f"{path}: no such file (is {folder} a result directory?)")
+    with reading(paths["X.npy"]):
+        X = check_correspondences(np.load(paths["X.npy"], allow_pickle=False), paths["X.npy"])
+    with reading(paths["labels.npy"]):
+        labels = check_labels(mmio.read_labels(paths["labels.npy"]), len(X), paths["labels.npy"])
+    with reading(paths["motions.json"]):
+        motions = mmio.read_motions(paths["motions.json"])
+    rotations, translations = motions["rotations"], motions["translations"]
+    if len(rotations) < labels.max(initial=-1) + 1:
+        raise CLIError(
+            f"{paths['motions.json']}: {len(rotations)} motions for labels up to {labels.max()}"
+        )
+    title = args.title
+    if title is None:
+        n_moving = int(np.sum(motions["moving"])) if motions.get("moving") is not None else 0
+        title = (
+            f"{folder.name}: {len(X):,} correspondences -> {plural(len(rotations), 'cluster')} "
+            f"({n_moving} moving), {int(np.sum(labels < 0)):,} outliers"
+        )
+    camera = None
+    if (folder / "run.json").exists():  # the intrinsics, when the result has them
+        with reading(folder / "run.json"):
+            camera = json.loads((folder / "run.json").read_text()).get("camera")
+    fig = result_figure(
+        X,
+        labels,
+        (rotations, translations),
+        moving=motions.get("moving"),
+        view=args.view,
+        title=title,
+        camera=camera,
+    )
+    out = Path(args.out) if args.out is not None else folder / "result.png"
+    png = render_png(fig, dpi=args.dpi)
+    with reading(out), mmio.atomic_write(out) as handle:
+        handle.write(png)
+    print(f"written: {out}")
+    return 0

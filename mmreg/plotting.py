@@ -1,0 +1,793 @@
+"""Pictures of a registration: clusters in 3-D, from above, through the camera, side by side.
+
+Every function draws the a-points coloured by cluster with one colour scheme: the largest
+cluster (the static background, in a driving scene) in a neutral sand colour, the other
+clusters in a qualitative palette by decreasing size, the outliers (label ``-1``) small
+and grey. Functions draw into the ``ax`` or ``fig`` they are given, else into a new
+:mod:`matplotlib.pyplot` figure, and return it; none calls ``plt.show``, so they are safe
+under the Agg backend and in scripts that only save files.
+
+Views (``view``):
+
+* ``"3d"``: a 3-D scatter of ``(x, y, z)`` as given;
+* ``"top"``: looking down the z axis, x to the right and y up;
+* ``"bev"``: bird's-eye view of a camera frame (x right, y down, z forward, as in KITTI,
+  FlyingThings3D and OpenCV): x to the right, z (distance ahead) up the page;
+* ``"camera"``: the points as a pinhole camera at the origin sees them; in pixels when
+  ``camera`` gives the intrinsics (``fx``, ``fy``, ``cx``, ``cy``, ``width``, ``height``),
+  else in normalised image coordinates ``(x / z, y / z)``.
+"""
+
+import numpy as np
+
+__all__ = [
+    "BACKGROUND_COLOR",
+    "OUTLIER_COLOR",
+    "VIEWS",
+    "cluster_colors",
+    "cluster_palette",
+    "plot_clusters",
+    "plot_comparison",
+    "plot_street",
+]
+
+VIEWS = ("3d", "top", "bev", "camera")
+#: Colour of the largest cluster (the background): a light sand, neutral beside the palette.
+BACKGROUND_COLOR = (0.80, 0.76, 0.68)
+#: Colour of the outliers (label ``-1``).
+OUTLIER_COLOR = (0.35, 0.35, 0.35)
+_GREY_TAB10 = 7  # tab10's grey, left out: grey means outliers
+_LEGEND_ENTRIES = 12
+# background="auto": the largest cluster is the background when at least this many times
+# larger than the second largest.
+_BACKGROUND_RATIO = 1.5
+
+
+def _qualitative(n):
+    """``n`` distinct colours: tab10 without its grey, then tab20's light shades, then husl."""
+    import seaborn as sns
+
+    tab10 = [c for i, c in enumerate(sns.color_palette("tab10", 10)) if i != _GREY_TAB10]
+    light = [c for i, c in enumerate(sns.color_palette("tab20", 20)) if i % 2 and i != 15]
+    colors = tab10 + light
+    if n > len(colors):
+        colors += sns.color_palette("husl", n - len(colors))
+    return np.array(colors[:n], dtype=float).reshape(n, 3)
+
+
+def cluster_palette(n_colors, *, background=True):
+    """The colours of clusters ranked by size: background first, then the palette.
+
+    Parameters
+    ----------
+    n_colors : int
+        Number of clusters to colour.
+    background : bool, default=True
+        Whether the first (largest) cluster is the background, in :data:`BACKGROUND_COLOR`.
+
+    Returns
+    -------
+    colors : ndarray of shape (n_colors, 3)
+        RGB in ``[0, 1]``.
+
+    Examples
+    --------
+    >>> from mmreg.plotting import BACKGROUND_COLOR, cluster_palette
+    >>> colors = cluster_palette(4)
+    >>> colors.shape, tuple(colors[0]) == BACKGROUND_COLOR
+    ((4, 3), True)
+    """
+    n_colors = int(n_colors)
+    if n_colors <= 0:
+        return np.zeros((0, 3))
+    if not background:
+        return _qualitative(n_colors)
+    return np.vstack([BACKGROUND_COLOR, _qualitative(n_colors - 1)])
+
+
+def _check_labels(labels, n, name="labels"):
+    labels = np.asarray(labels)
+    if labels.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},), one per a-point; got {labels.shape}.")
+    integral = labels.dtype.kind in "iu" or (
+        labels.dtype.kind == "f" and np.all(labels == np.round(labels))
+    )
+    if not integral:
+        raise TypeError(f"{name} must be integers; got dtype {labels.dtype}.")
+    return labels.astype(np.intp)
+
+
+def _check_points(points, name):
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise ValueError(f"{name} must have shape (n, 3) (or (n, 2)); got {points.shape}.")
+    return points
+
+
+def _ranked(labels):
+    """Cluster ids (not -1) by decreasing size (ties: smaller id first), and their sizes."""
+    ids, sizes = np.unique(labels[labels >= 0], return_counts=True)
+    order = np.lexsort((ids, -sizes))
+    return ids[order], sizes[order]
+
+
+def _background_label(labels, background):
+    """The label drawn as the background, or None (see ``background`` of plot_clusters)."""
+    if background not in ("auto", True, False):
+        raise ValueError(f"background must be 'auto', True or False; got {background!r}.")
+    ids, sizes = _ranked(labels)
+    if not len(ids) or background is False:
+        return None
+    if background == "auto" and len(ids) > 1 and sizes[0] < _BACKGROUND_RATIO * sizes[1]:
+        return None
+    return int(ids[0])
+
+
+def _color_table(labels, background="auto"):
+    """``{label: rgb}`` for every cluster by decreasing size, ``-1`` included."""
+    ids = _ranked(labels)[0]
+    has_background = _background_label(labels, background) is not None
+    table = dict(
+        zip(ids.tolist(), cluster_palette(len(ids), background=has_background), strict=True)
+    )
+    table[-1] = np.array(OUTLIER_COLOR)
+    return table
+
+
+def cluster_colors(labels, *, background="auto"):
+    """Colour of every point by its cluster, as the plots draw it.
+
+    Parameters
+    ----------
+    labels : array-like of shape (n,)
+        Cluster of each point, ``-1`` for outliers.
+    background : {"auto", True, False}, default="auto"
+        Whether the largest cluster is drawn in the neutral :data:`BACKGROUND_COLOR`;
+        ``"auto"``: when it holds at least 1.5 times the points of the second largest.
+
+    Returns
+    -------
+    colors : ndarray of shape (n, 3)
+        RGB in ``[0, 1]``: ready for :func:`mmreg.io.write_point_cloud` or ``scatter``.
+
+    Examples
+    --------
+    >>> from mmreg.plotting import OUTLIER_COLOR, cluster_colors
+    >>> colors = cluster_colors([1, 1, 0, -1])
+    >>> colors.shape, tuple(colors[3]) == OUTLIER_COLOR
+    ((4, 3), True)
+    """
+    labels = np.asarray(labels)
+    labels = _check_labels(labels, len(labels))
+    table = _color_table(labels, background)
+    colors = np.empty((len(labels), 3))
+    for label, color in table.items():
+        colors[labels == label] = color
+    return colors
+
+
+def _name(label, size, background_label, label_names, kind):
+    if label_names is not None and label in label_names:
+        return f"{label_names[label]} ({size:,} pts)"
+    if label < 0:
+        return f"outliers ({size:,} pts)"
+    if label == background_label:
+        return f"{kind} {label}: background ({size:,} pts)"
+    return f"{kind} {label} ({size:,} pts)"
+
+
+def _legend(ax, labels, table, background_label, label_names, *, kind="cluster", extra=(), **kw):
+    from matplotlib.lines import Line2D
+
+    ids, sizes = _ranked(labels)
+    entries = list(zip(ids.tolist(), sizes.tolist(), strict=True))
+    shown, rest = entries[:_LEGEND_ENTRIES], entries[_LEGEND_ENTRIES:]
+    n_out = int(np.sum(labels < 0))
+    if n_out:
+        shown.append((-1, n_out))
+    handles = [
+        Line2D(
+            [],
+            [],
+            linestyle="none",
+            marker="o",
+            markersize=6 if label >= 0 else 4,
+            color=table[label],
+            label=_name(label, size, background_label, label_names, kind),
+        )
+        for label, size in shown
+    ]
+    if rest:
+        handles.append(
+            Line2D(
+                [],
+                [],
+                linestyle="none",
+                label=f"+ {len(rest)} smaller clusters ({sum(s for _, s in rest):,} pts)",
+            )
+        )
+    handles.extend(extra)
+    return ax.legend(handles=handles, fontsize=7, framealpha=0.85, **kw)
+
+
+def _subsample(labels, background_label, max_points, random_state):
+    """Indices to draw: every object point while they fit in half the budget, then the rest."""
+    n = len(labels)
+    if max_points is None or n <= max_points:
+        return np.arange(n)
+    rng = np.random.default_rng(random_state)
+    objects = np.flatnonzero((labels >= 0) & (labels != background_label))
+    others = np.flatnonzero((labels < 0) | (labels == background_label))
+    if len(objects) > max_points // 2:
+        objects = rng.choice(objects, max_points // 2, replace=False)
+    budget = max_points - len(objects)
+    if len(others) > budget:
+        others = rng.choice(others, budget, replace=False)
+    return np.sort(np.concatenate([objects, others]))
+
+
+def _check_camera(camera):
+    if camera is None:
+        return None
+    get = camera.get if hasattr(camera, "get") else lambda k: getattr(camera, k, None)
+    values = {k: get(k) for k in ("fx", "fy", "cx", "cy", "width", "height")}
+    missing = [k for k, v in values.items() if v is None]
+    if missing:
+        raise ValueError(f"camera needs fx, fy, cx, cy, width and height; missing {missing}.")
+    return {k: float(v) for k, v in values.items()}
+
+
+def _project(points, view, camera, units):
+    """2-D coordinates of ``points`` in a flat view, which of them are visible, axis labels."""
+    visible = np.ones(len(points), dtype=bool)
+    if view == "top":
+        return points[:, :2], visible, (f"x [{units}]", f"y [{units}]")
+    if points.shape[1] != 3:
+        raise ValueError(f"view={view!r} needs 3-D points; got {points.shape[1]}-D.")
+    if view == "bev":
+        xy = points[:, [0, 2]]
+        return xy, visible, (f"x, to the right [{units}]", f"z, ahead of the camera [{units}]")
+    # camera
+    depth = points[:, 2]
+    visible = depth > 0
+    safe = np.where(visible, depth, 1.0)
+    uv = points[:, :2] / safe[:, np.newaxis]
+    if camera is None:
+        return uv, visible, ("x / z (right)", "y / z (down)")
+    uv = uv * [camera["fx"], camera["fy"]] + [camera["cx"], camera["cy"]]
+    return uv, visible, ("image column [pixels]", "image row [pixels]")
+
+
+def _point_size(n, point_size, view):
+    if point_size is not None:
+        return float(point_size)
+    scale = 6e4 if view == "camera" else 3e4  # an image is filled, a 3-D box is not
+    return float(np.clip(scale / max(n, 1), 0.4, 20.0))
+
+
+def _arrow_ends(a, labels, motions, ids, relative_to):
+    """Centroid of each cluster's a-points and where its motion takes it."""
+    rotations, translations = (np.asarray(m, dtype=float) for m in motions)
+    starts, ends, kept = [], [], []
+    for label in ids:
+        if label < 0 or label >= len(rotations):
+            continue
+        center = a[labels == label].mean(axis=0)
+        end = rotations[label] @ center + translations[label]
+        if relative_to is not None:  # back into the first frame by the background's motion
+            end = rotations[relative_to].T @ (end - translations[relative_to])
+        starts.append(center)
+        ends.append(end)
+        kept.append(label)
+    return np.array(starts).reshape(-1, a.shape[1]), np.array(ends).reshape(-1, a.shape[1]), kept
+
+
+def _new_axes(ax, view):
+    if ax is not None:
+        if view == "3d" and getattr(ax, "name", "") != "3d":
+            raise ValueError("view='3d' needs a 3-D axes: fig.add_subplot(projection='3d').")
+        return ax
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(7, 6))
+    return fig.add_subplot(projection="3d" if view == "3d" else None)
+
+
+def plot_clusters(
+    a,
+    labels,
+    *,
+    b=None,
+    ax=None,
+    view="3d",
+    motions=None,
+    relative_to=None,
+    camera=None,
+    background="auto",
+    label_names=None,
+    title=None,
+    units="m",
+    legend=True,
+    kind="cluster",
+    point_size=None,
+    max_points=60_000,
+    random_state=0,
+    colors=None,
+):
+    """Draw the a-points coloured by cluster, with optional motion arrows or b-points.
+
+    Parameters
+    ----------
+    a : array-like of shape (n, 3)
+        The a-points (``X[:, :3]``); 2-D points work with ``view="top"``.
+    labels : array-like of shape (n,)
+        Cluster of each correspondence (e.g. ``labels_``), ``-1`` for outliers.
+    b : array-like of shape (n, 3), default=None
+        The b-points, drawn faded in their cluster's colour.
+    ax : matplotlib Axes, default=None
+        Where to draw (a 3-D axes for ``view="3d"``); None: a new pyplot figure.
+    view : {"3d", "top", "bev", "camera"}, default="3d"
+        See the module's description.
+    motions : (rotations, translations), default=None
+        Arrays ``(K, 3, 3)`` and ``(K, 3)`` indexed by label (e.g. ``rotations_``,
+        ``translations_``): an arrow from each cluster's centroid ``c`` to ``R c + t``.
+    relative_to : int, default=None
+        A label whose motion is undone at the arrows' heads (``R_0^T (R c + t - t_0)``),
+        so they show each cluster's motion relative to that cluster (the background
+        when the camera moves).
+    camera : dict, default=None
+        ``fx``, ``fy``, ``cx``, ``cy``, ``width``, ``height`` for ``view="camera"`` in
+        pixels (e.g. ``make_street(...).camera``).
+    background : {"auto", True, False}, default="auto"
+        Whether the largest cluster is the background, drawn in the neutral
+        :data:`BACKGROUND_COLOR`; ``"auto"``: when it holds at least 1.5 times the points
+        of the second largest.
+    label_names : dict, default=None
+        ``{label: name}`` for the legend, e.g. ``{0: "static world"}``.
+    kind : str, default="cluster"
+        How the legend calls a cluster (e.g. ``"object"`` for the ground truth).
+    title : str, default=None
+    units : str, default="m"
+        Unit of the coordinates, for the axis labels.
+    legend : bool, default=True
+        Whether to draw a legend: to the right of a flat view, in the upper left corner
+        of a 3-D one.
+    point_size : float, default=None
+        Marker area in points^2; None: from the number of points.
+    max_points : int or None, default=60000
+        At most this many points are drawn (background and outliers thinned first).
+    random_state : int, default=0
+        Seeds the thinning.
+    colors : dict, default=None
+        ``{label: rgb}`` overriding the colours (used by :func:`plot_comparison`).
+
+    Returns
+    -------
+    ax : matplotlib Axes
+
+    See Also
+    --------
+    plot_street : Camera view and bird's-eye view of a driving scene, side by side.
+    plot_comparison : Ground truth and estimate side by side, in matching colours.
+
+    Examples
+    --------
+    >>> import matplotlib
+    >>> matplotlib.use("Agg")
+    >>> from matplotlib.figure import Figure
+    >>> from mmreg import MultiModelRegistration
+    >>> from mmreg.datasets import make_scene
+    >>> from mmreg.plotting import plot_clusters
+    >>> scene = make_scene(n_objects=3, n_points=600, random_state=0)
+    >>> est = MultiModelRegistration(init=scene.labels).fit(scene.X)
+    >>> fig = Figure()
+    >>> ax = plot_clusters(scene.a, est.labels_, ax=fig.add_subplot(projection="3d"),
+    ...                    motions=(est.rotations_, est.translations_))
+    >>> [text.get_text() for text in ax.get_legend().get_texts()]
+    ['cluster 0 (200 pts)', 'cluster 1 (200 pts)', 'cluster 2 (200 pts)', 'arrow: motion']
+    """
+    if view not in VIEWS:
+        raise ValueError(f"view must be one of {VIEWS}; got {view!r}.")
+    a = _check_points(a, "a")
+    labels = _check_labels(labels, len(a))
+    camera = _check_camera(camera)
+    ax = _new_axes(ax, view)
+    ids, _ = _ranked(labels)
+    background_label = _background_label(labels, background)
+    table = _color_table(labels, background)
+    if colors is not None:
+        table.update({int(k): np.asarray(v, dtype=float) for k, v in colors.items()})
+    keep = _subsample(labels, background_label, max_points, random_state)
+    size = _point_size(len(keep), point_size, view)
+
+    # One scatter, drawn back to front: background, outliers, then the other clusters.
+    rank = np.where(labels == background_label, 0, np.where(labels < 0, 1, 2))[keep]
+    point_colors = np.array([table[label] for label in ids.tolist()] + [table[-1]])
+    lookup = {label: i for i, label in enumerate(ids.tolist())}
+    lookup[-1] = len(ids)
+    index = np.array([lookup[label] for label in labels[keep].tolist()], dtype=np.intp)
+    colors_kept = point_colors[index].reshape(-1, 3)
+    sizes = np.where(labels[keep] < 0, 0.5 * size, size)
+    extra = []
+    if view == "3d":
+        order = np.argsort(rank, kind="stable")
+        pts = a[keep][order]
+        ax.scatter(
+            pts[:, 0],
+            pts[:, 1],
+            pts[:, 2],
+            c=colors_kept[order],
+            s=sizes[order],
+            linewidths=0,
+            depthshade=False,
+        )
+        ax.set_xlabel(f"x [{units}]")
+        ax.set_ylabel(f"y [{units}]")
+        ax.set_zlabel(f"z [{units}]")
+        ax.set_box_aspect(np.ptp(a, axis=0) + 1e-9 * np.ptp(a).clip(min=1.0))
+        if b is not None:
+            b = _check_points(b, "b")
+            pts = b[keep][order]
+            ax.scatter(
+                pts[:, 0],
+                pts[:, 1],
+                pts[:, 2],
+                c=colors_kept[order],
+                s=sizes[order] * 0.5,
+                alpha=0.25,
+                linewidths=0,
+                depthshade=False,
+            )
+    else:
+        xy, visible, (xlabel, ylabel) = _project(a, view, camera, units)
+        shown = visible[keep]
+        if view == "camera":  # painter's order: far points first
+            order = np.lexsort((-a[keep, 2], rank))
+        else:
+            order = np.argsort(rank, kind="stable")
+        order = order[shown[order]]
+        pts = xy[keep][order]
+        if b is not None:
+            b = _check_points(b, "b")
+            bxy, bvisible, _ = _project(b, view, camera, units)
+            border = order[bvisible[keep][order]]
+            ax.scatter(
+                *bxy[keep][border].T,
+                c=colors_kept[border],
+                s=sizes[border] * 0.5,
+                alpha=0.25,
+                linewidths=0,
+            )
+        ax.scatter(*pts.T, c=colors_kept[order], s=sizes[order], linewidths=0)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_aspect("equal", adjustable="datalim" if view != "camera" else "box")
+        if view == "camera":
+            if camera is not None:
+                ax.set_xlim(0, camera["width"])
+                ax.set_ylim(camera["height"], 0)
+            else:
+                ax.invert_yaxis()
+    if b is not None:
+        from matplotlib.lines import Line2D
+
+        extra.append(
+            Line2D([], [], linestyle="none", marker="o", color="0.6", alpha=0.4, label="b-points")
+        )
+    if motions is not None:
+        extra.append(_draw_arrows(ax, a, labels, motions, ids, relative_to, view, camera, units))
+    if legend:
+        _legend(
+            ax,
+            labels,
+            table,
+            background_label,
+            label_names,
+            kind=kind,
+            extra=[e for e in extra if e],
+            # Beside a flat view; inside a 3-D one (layout engines leave it out there).
+            loc="upper left",
+            bbox_to_anchor=(1.02, 1.0) if view != "3d" else (0.0, 1.0),
+            borderaxespad=0.0,
+        )
+    if title is not None:
+        ax.set_title(title, fontsize=10)
+    return ax
+
+
+def _draw_arrows(ax, a, labels, motions, ids, relative_to, view, camera, units):
+    """Arrows from each cluster's centroid to where its motion takes it; None if none shows.
+
+    Arrows shorter than 1 % of the extent of the drawing are left out (a static cluster
+    relative to the background, say).
+    """
+    from matplotlib.lines import Line2D
+
+    starts, ends, kept = _arrow_ends(a, labels, motions, ids.tolist(), relative_to)
+    if view == "3d":
+        extent = float(np.max(np.ptp(a, axis=0)))
+        p, q = starts, ends
+    else:
+        xy, visible, _ = _project(a, view, camera, units)
+        extent = float(np.max(np.ptp(xy[visible], axis=0))) if visible.any() else 0.0
+        p, visible_p, _ = _project(starts, view, camera, units)
+        q, visible_q, _ = _project(ends, view, camera, units)
+        p, q = p[visible_p & visible_q], q[visible_p & visible_q]
+    long_enough = np.linalg.norm(q - p, axis=1) > 0.01 * extent
+    p, q = p[long_enough], q[long_enough]
+    if not len(p):
+        return None
+    if view == "3d":
+        d = q - p
+        ax.quiver(*p.T, *d.T, color="black", linewidth=1.0, arrow_length_ratio=0.15)
+    else:
+        for s, e in zip(p, q, strict=True):
+            ax.annotate(
+                "",
+                xy=e,
+                xytext=s,
+                arrowprops={
+                    "arrowstyle": "-|>",
+                    "color": "black",
+                    "lw": 1.2,
+                    "mutation_scale": 9,
+                    "shrinkA": 0,
+                    "shrinkB": 0,
+                },
+            )
+    what = "motion relative to the background" if relative_to is not None else "motion"
+    return Line2D([], [], color="black", marker=">", label=f"arrow: {what}")
+
+
+def _new_figure(fig, figsize):
+    if fig is not None:
+        return fig
+    import matplotlib.pyplot as plt
+
+    return plt.figure(figsize=figsize)
+
+
+def plot_street(
+    a,
+    labels,
+    *,
+    motions=None,
+    camera=None,
+    fig=None,
+    title=None,
+    label_names=None,
+    max_points=60_000,
+):
+    """A driving scene: the camera's view and a bird's-eye view side by side.
+
+    The points are in a camera frame (x right, y down, z forward: KITTI's convention,
+    :func:`~mmreg.datasets.make_street`'s). The largest cluster is taken for the static
+    world, and the arrows show the other clusters' motions relative to it (what a car
+    drove between the frames, with the camera's own motion taken out).
+
+    Parameters
+    ----------
+    a : array-like of shape (n, 3)
+        The a-points, in the first camera's frame.
+    labels : array-like of shape (n,)
+        Cluster of each correspondence, ``-1`` for outliers.
+    motions : (rotations, translations), default=None
+        Per label, ``b = R a + t``; arrows relative to the largest cluster's motion.
+    camera : dict, default=None
+        Intrinsics (``fx``, ``fy``, ``cx``, ``cy``, ``width``, ``height``) for the camera
+        view in pixels; None: normalised image coordinates.
+    fig : matplotlib Figure, default=None
+        Where to draw (it should be empty); None: a new pyplot figure, 13 x 5.5 inches.
+    title : str, default=None
+        Figure title.
+    label_names : dict, default=None
+        ``{label: name}`` for the legend.
+    max_points : int or None, default=60000
+        Drawn at most, per panel.
+
+    Returns
+    -------
+    fig : matplotlib Figure
+
+    Examples
+    --------
+    >>> import matplotlib
+    >>> matplotlib.use("Agg")
+    >>> from matplotlib.figure import Figure
+    >>> from mmreg.datasets import make_street
+    >>> from mmreg.plotting import plot_street
+    >>> scene = make_street(n_points=2000, corruption=False, sam_masks=False, random_state=0)
+    >>> fig = plot_street(scene.a, scene.labels, camera=scene.camera,
+    ...                   motions=(scene.rotations, scene.translations), fig=Figure())
+    >>> [ax.get_title() for ax in fig.axes][:2]
+    ["bird's-eye view (metres)", 'camera view (pixels)']
+    """
+    a = _check_points(a, "a")
+    labels = _check_labels(labels, len(a))
+    fig = _new_figure(fig, (13, 5.5))
+    _use_constrained_layout(fig)
+    grid = fig.add_gridspec(2, 2, width_ratios=[1.0, 2.4], height_ratios=[1.0, 0.55])
+    bev = fig.add_subplot(grid[:, 0])
+    cam = fig.add_subplot(grid[0, 1])
+    key = fig.add_subplot(grid[1, 1])
+    reference = _background_label(labels, True)
+    options = {"label_names": label_names, "max_points": max_points, "background": True}
+    plot_clusters(
+        a,
+        labels,
+        ax=bev,
+        view="bev",
+        motions=motions,
+        relative_to=reference,
+        legend=False,
+        title="bird's-eye view (metres)",
+        **options,
+    )
+    bev.plot([0], [0], marker="^", color="black", markersize=8, linestyle="none")
+    bev.annotate("camera", (0, 0), xytext=(6, -4), textcoords="offset points", fontsize=8)
+    plot_clusters(
+        a,
+        labels,
+        ax=cam,
+        view="camera",
+        camera=camera,
+        legend=False,
+        title="camera view" + (" (pixels)" if camera is not None else " (x / z, y / z)"),
+        **options,
+    )
+    key.set_axis_off()
+    extra = []
+    if motions is not None:
+        from matplotlib.lines import Line2D
+
+        extra.append(
+            Line2D(
+                [],
+                [],
+                color="black",
+                marker=">",
+                label="arrow: motion between the frames,\nrelative to the background",
+            )
+        )
+    _legend(
+        key,
+        labels,
+        _color_table(labels, True),
+        reference,
+        label_names,
+        extra=extra,
+        loc="upper center",
+        ncol=3,
+    )
+    if title is not None:
+        fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def _use_constrained_layout(fig):
+    if fig.get_layout_engine() is None:
+        fig.set_layout_engine("constrained")
+
+
+def _matched_colors(labels_true, labels_pred):
+    """Colours of the true clusters, and of the predicted ones by their matched true cluster.
+
+    Predicted clusters are matched one-to-one to true clusters (most shared points,
+    Hungarian method); a matched cluster takes its true cluster's colour, an unmatched
+    one a colour of its own.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    true_ids, _ = _ranked(labels_true)
+    pred_ids, _ = _ranked(labels_pred)
+    true_table = _color_table(labels_true, True)
+    if not len(true_ids) or not len(pred_ids):
+        return true_table, _color_table(labels_pred, True)
+    t_index = {label: i for i, label in enumerate(true_ids.tolist())}
+    p_index = {label: i for i, label in enumerate(pred_ids.tolist())}
+    both = (labels_true >= 0) & (labels_pred >= 0)
+    overlap = np.zeros((len(true_ids), len(pred_ids)))
+    np.add.at(
+        overlap,
+        (
+            np.array([t_index[v] for v in labels_true[both].tolist()], dtype=np.intp),
+            np.array([p_index[v] for v in labels_pred[both].tolist()], dtype=np.intp),
+        ),
+        1.0,
+    )
+    rows, cols = linear_sum_assignment(-overlap)
+    pred_table = {-1: np.array(OUTLIER_COLOR)}
+    matched = {}
+    for r, c in zip(rows, cols, strict=True):
+        if overlap[r, c] > 0:
+            matched[int(pred_ids[c])] = true_table[int(true_ids[r])]
+    spare = iter(_qualitative(len(true_ids) + len(pred_ids))[max(len(true_ids) - 1, 0) :])
+    for label in pred_ids.tolist():
+        pred_table[label] = matched[label] if label in matched else next(spare)
+    return true_table, pred_table
+
+
+def plot_comparison(
+    a,
+    labels_true,
+    labels_pred,
+    *,
+    view="3d",
+    camera=None,
+    fig=None,
+    titles=("ground truth", "estimate"),
+    title=None,
+    max_points=60_000,
+):
+    """Ground truth and estimated clusters side by side, a match in the same colour.
+
+    Each estimated cluster is matched one-to-one to the true object it shares the most
+    points with (Hungarian method) and drawn in that object's colour; unmatched clusters
+    get colours of their own, so a split object shows as two colours on the right.
+
+    Parameters
+    ----------
+    a : array-like of shape (n, 3)
+        The a-points.
+    labels_true, labels_pred : array-like of shape (n,)
+        True and estimated clusters, ``-1`` for outliers.
+    view : {"3d", "top", "bev", "camera"}, default="3d"
+    camera : dict, default=None
+        Intrinsics for ``view="camera"``.
+    fig : matplotlib Figure, default=None
+        Where to draw (empty); None: a new pyplot figure.
+    titles : (str, str), default=("ground truth", "estimate")
+    title : str, default=None
+        Figure title.
+    max_points : int or None, default=60000
+
+    Returns
+    -------
+    fig : matplotlib Figure
+
+    Examples
+    --------
+    >>> import matplotlib
+    >>> matplotlib.use("Agg")
+    >>> from matplotlib.figure import Figure
+    >>> from mmreg import MultiModelRegistration
+    >>> from mmreg.datasets import make_scene
+    >>> from mmreg.plotting import plot_comparison
+    >>> scene = make_scene(n_objects=3, n_points=600, random_state=0)
+    >>> est = MultiModelRegistration(init=scene.labels).fit(scene.X)
+    >>> fig = plot_comparison(scene.a, scene.labels, est.labels_, view="top", fig=Figure())
+    >>> len(fig.axes)
+    2
+    """
+    if view not in VIEWS:
+        raise ValueError(f"view must be one of {VIEWS}; got {view!r}.")
+    a = _check_points(a, "a")
+    labels_true = _check_labels(labels_true, len(a), "labels_true")
+    labels_pred = _check_labels(labels_pred, len(a), "labels_pred")
+    wide = view == "camera"
+    fig = _new_figure(fig, (12, 7.5) if wide else (12, 5.5))
+    _use_constrained_layout(fig)
+    true_table, pred_table = _matched_colors(labels_true, labels_pred)
+    projection = "3d" if view == "3d" else None
+    shape = (2, 1) if wide else (1, 2)
+    panels = [
+        (labels_true, true_table, titles[0], "object"),
+        (labels_pred, pred_table, titles[1], "cluster"),
+    ]
+    for i, (labels, table, name, kind) in enumerate(panels):
+        ax = fig.add_subplot(*shape, i + 1, projection=projection)
+        plot_clusters(
+            a,
+            labels,
+            ax=ax,
+            view=view,
+            camera=camera,
+            colors=table,
+            background=True,
+            kind=kind,
+            title=name,
+            max_points=max_points,
+        )
+    if title is not None:
+        fig.suptitle(title, fontsize=11)
+    return fig
