@@ -122,6 +122,25 @@ def _box_gaps(points, components, n_components):
     return gaps
 
 
+def _near_other_box(points, components, n_components, max_distance):
+    """Whether each point lies within ``max_distance`` (per axis) of another component's box.
+
+    A per-axis (Chebyshev) test: it keeps every point within ``max_distance`` of another
+    component's bounding box, and a few more near the boxes' corners, which the exact
+    query that follows discards.
+    """
+    order = np.argsort(components, kind="stable")
+    starts = np.searchsorted(components[order], np.arange(n_components))
+    low = np.minimum.reduceat(points[order], starts, axis=0) - max_distance
+    high = np.maximum.reduceat(points[order], starts, axis=0) + max_distance
+    near = np.zeros(len(points), dtype=bool)
+    for c in range(n_components):
+        inside = np.all((points >= low[c]) & (points <= high[c]), axis=1)
+        inside &= components != c
+        near |= inside
+    return near
+
+
 def nearest_in_other_component(points, components, *, max_distance=np.inf, sources=None, workers=1):
     """Each point's nearest neighbour among the points of the other components.
 
@@ -160,7 +179,7 @@ def nearest_in_other_component(points, components, *, max_distance=np.inf, sourc
     n_components = int(components.max()) + 1 if n else 0
     sources = np.arange(n) if sources is None else np.asarray(sources, dtype=np.intp)
     if np.isfinite(max_distance) and 1 < n_components <= _BOX_PRUNING_MAX_COMPONENTS:
-        sources = sources[_box_gaps(points, components, n_components)[sources] <= max_distance]
+        sources = sources[_near_other_box(points, components, n_components, max_distance)[sources]]
     best = np.full(n, np.inf)
     target = np.full(n, -1, dtype=np.intp)
     # cKDTree's bound is strict; the next float up makes it inclusive.

@@ -74,7 +74,7 @@ def _sampling_spacing(points, k=6):
     n = len(points)
     if n < 2:
         return np.zeros(n)
-    distance, index = cKDTree(points).query(points, k=min(k, n))
+    distance, index = cKDTree(points).query(points, k=min(k, n), workers=-1)
     return np.median(distance[:, 1][index], axis=1)
 
 

@@ -488,7 +488,9 @@ def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0):
         return np.empty(0, dtype=np.intp)
     own = labels[rows]
     bound = thickness * float(np.max(spacing[rows]))
-    source, target, distance = nearest_in_other_component(points[rows], own, max_distance=bound)
+    source, target, distance = nearest_in_other_component(
+        points[rows], own, max_distance=bound, workers=-1
+    )
     gap = np.full(len(rows), np.inf)
     gap[source] = distance
     order = np.lexsort((gap, own))
