@@ -188,9 +188,11 @@ class MultiModelRegistration(BaseRegistration):
        does not split into depth layers, nor swallow the near objects in front of it.
     5. *Outliers*: a correspondence stays in its cluster ``j`` only if
        ``pi_j N(r; 0, sigma_j^2 I) >= pi_0 / V``, a uniform component over the bounding
-       box (volume ``V``) of the b-points whose weight ``pi_0`` is the share of outliers
-       of the previous iteration (at least ``1 / n``): a residual test at about 5-7
-       ``sigma_j``. The parameter-free choice of CPD (Myronenko and Song, 2010).
+       box (volume ``V``) of the displacements ``b - a`` (a wrong match or flow moves its
+       point by something in the range the scene shows) whose weight ``pi_0`` is the
+       share of outliers of the previous iteration (at least ``1 / n``): a residual test
+       at about 4-7 ``sigma_j``. The parameter-free uniform component of CPD (Myronenko
+       and Song, 2010), over displacements rather than positions.
     6. *Proposals*: the correspondences labelled -1 are split into ``tau``-connected
        groups; in each, ``n_hypotheses`` local minimal samples are fitted and the one
        with most inliers becomes a new cluster if its inliers' likelihood beats the

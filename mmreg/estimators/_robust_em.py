@@ -137,7 +137,7 @@ def robust_multi_model_em(
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
     labels, n_clusters = _compact_initial(init_labels)
-    log_volume_density = log_uniform_density(b)
+    log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
     spacing = _sampling_spacing(a)
     history = []
