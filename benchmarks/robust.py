@@ -28,22 +28,16 @@ import pandas as pd
 from sklearn.cluster import KMeans
 
 from mmreg import MultiModelRegistration
-from mmreg.datasets import make_flying_things, make_scene, make_street
+from mmreg.datasets import (
+    add_wrong_correspondences,
+    make_flying_things,
+    make_scene,
+    make_street,
+)
 from mmreg.init import EuclideanClustering, PrecomputedMasks
 from mmreg.metrics import iou_score, objects_found
 
 HERE = Path(__file__).resolve().parent
-
-
-def wrong_matches(scene, fraction, seed):
-    rng = np.random.default_rng(seed)
-    X, y = scene.X.copy(), scene.labels.copy()
-    wrong = rng.choice(len(X), int(fraction * len(X)), replace=False)
-    direction = rng.normal(size=(len(wrong), 3))
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    X[wrong, 3:] += direction * rng.uniform(0.5, 1.5, (len(wrong), 1))
-    y[wrong] = -1
-    return X, y
 
 
 def voxels(points, size):
@@ -56,7 +50,9 @@ def scenes(seed, quick):
     table = make_scene(noise=0.03, object_size=3.0, shapes="meshes", random_state=seed)
     moving = np.arange(1, 7)
     yield "exp2", table.X, table.labels, None, moving, {"euclidean": "euclidean"}, 1.5
-    X, y = wrong_matches(table, 0.1, seed)
+    X, y = add_wrong_correspondences(
+        table.X, table.labels, 0.1, random_state=np.random.default_rng(seed)
+    )
     yield "exp2+10%", X, y, None, moving, {"euclidean": "euclidean"}, 1.5
     if not quick:
         kmeans = KMeans(100, n_init=1, random_state=seed).fit_predict(X[:, :3])

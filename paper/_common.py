@@ -4,7 +4,7 @@
   (:mod:`mmreg.methods`) with the paper's parameters and an initial clustering;
   :func:`select_columns` honours ``--methods`` and adds third-party methods.
 * :class:`Experiment`: a family of scenes (a pure function of a seed) and its columns;
-  :func:`flow_scene` and :func:`wrong_correspondences` build the scenes the scripts share.
+  :func:`flow_scene` builds the flow scenes the scripts share.
 * :func:`run_experiments`: every (experiment, column, seed) once, in parallel with joblib
   (``--n-jobs``) or on a Dask cluster (``--scheduler``), with a progress bar per
   experiment and a cache of one small JSON file per run, so an interrupted run resumes.
@@ -163,23 +163,6 @@ def timed_labels(initializer, X):
         start = time.perf_counter()
         labels = np.asarray(initializer.fit(X).labels_)
         return labels, time.perf_counter() - start
-
-
-def wrong_correspondences(X, labels, fraction, rng, scale=(0.5, 1.5)):
-    """Move the b-points of a random ``fraction`` by ``U(scale)`` metres; label them -1.
-
-    The wrong matches of a feature matcher or scene-flow network: the b-point is off by
-    about a metre in a random direction.
-    """
-    X, labels = np.array(X, dtype=float), np.array(labels)
-    if fraction <= 0:
-        return X, labels
-    wrong = rng.choice(len(X), int(round(fraction * len(X))), replace=False)
-    direction = rng.normal(size=(len(wrong), 3))
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    X[wrong, 3:] += direction * rng.uniform(*scale, (len(wrong), 1))
-    labels[wrong] = -1
-    return X, labels
 
 
 DATASETS = {

@@ -44,10 +44,9 @@ from _common import (
     timed_labels,
     write_frame,
     write_text,
-    wrong_correspondences,
 )
 
-from mmreg.datasets import make_scene
+from mmreg.datasets import add_wrong_correspondences, make_scene
 from mmreg.init import EuclideanClustering
 
 EXPERIMENTS = {
@@ -116,8 +115,8 @@ def table1_scene(seed, *, noise, same_motion, wrong_fraction, n_points, object_s
         random_state=seed,
         **kwargs,
     )
-    X, labels = wrong_correspondences(
-        scene.X, scene.labels, wrong_fraction, np.random.default_rng([seed, 4])
+    X, labels = add_wrong_correspondences(
+        scene.X, scene.labels, wrong_fraction, random_state=np.random.default_rng([seed, 4])
     )
     init, seconds = timed_labels(EuclideanClustering(100), X)
     return Scene(

@@ -9,7 +9,6 @@ import sys
 import textwrap
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
@@ -281,14 +280,3 @@ def test_best_in_bold_treats_exact_answers_as_ties():
         False,
         True,
     ]
-
-
-def test_wrong_correspondences_move_b_and_label_them():
-    rng = np.random.default_rng(0)
-    X = np.zeros((1000, 6))
-    moved, labels = _common.wrong_correspondences(X, np.zeros(1000, int), 0.1, rng)
-    off = np.linalg.norm(moved[:, 3:], axis=1)
-    assert (labels == -1).sum() == 100
-    assert np.array_equal(labels == -1, off > 0)
-    assert off.max() <= 1.5 and off[off > 0].min() >= 0.5
-    assert np.array_equal(moved[:, :3], X[:, :3])

@@ -13,22 +13,15 @@ from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
 
 from mmreg import MultiModelRegistration
-from mmreg.datasets import make_flying_things, make_scene, make_street
+from mmreg.datasets import (
+    add_wrong_correspondences,
+    make_flying_things,
+    make_scene,
+    make_street,
+)
 from mmreg.estimators import ScaleWarning, multi_model_em
 from mmreg.init import EuclideanClustering, PrecomputedMasks
 from mmreg.metrics import iou_score, objects_found, rotation_error
-
-
-def with_wrong_correspondences(scene, fraction, seed):
-    """``fraction`` of the b-points moved 0.5-1.5 m in a random direction; they are -1."""
-    rng = np.random.default_rng(seed)
-    X, y = scene.X.copy(), scene.labels.copy()
-    wrong = rng.choice(len(X), int(fraction * len(X)), replace=False)
-    direction = rng.normal(size=(len(wrong), 3))
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    X[wrong, 3:] += direction * rng.uniform(0.5, 1.5, (len(wrong), 1))
-    y[wrong] = -1
-    return X, y
 
 
 def quiet_fit(estimator, X):
@@ -47,7 +40,7 @@ def corrupted(request):
     """Table I, Exp. 2 at the paper's scale (objects 3 m across) + 10 % wrong b-points."""
     seed = request.param
     scene = make_scene(noise=0.03, object_size=3.0, random_state=seed)
-    X, y = with_wrong_correspondences(scene, 0.1, seed)
+    X, y = add_wrong_correspondences(scene.X, scene.labels, 0.1, random_state=seed)
     return scene, X, y
 
 

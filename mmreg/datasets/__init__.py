@@ -13,6 +13,7 @@ from mmreg.datasets._pfm import read_pfm, write_pfm
 from mmreg.datasets._sam import simulate_sam_masks
 from mmreg.datasets._scene import SHAPES, make_scene
 from mmreg.datasets._street import SURFACE_KINDS, make_street
+from mmreg.datasets._wrong_matches import add_wrong_correspondences
 from mmreg.io import read_correspondences as load_correspondences
 
 __all__ = [
@@ -20,6 +21,7 @@ __all__ = [
     "PRIMITIVES",
     "SHAPES",
     "SURFACE_KINDS",
+    "add_wrong_correspondences",
     "corrupt_scene_flow",
     "load_correspondences",
     "load_flying_things",
