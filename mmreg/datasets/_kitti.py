@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 from sklearn.utils import Bunch, check_random_state
 
-from mmreg.datasets._camera import pinhole_camera, sample_pixels
+from mmreg.datasets._camera import back_project, pinhole_camera, sample_pixels
 
 __all__ = ["load_kitti_scene_flow"]
 
@@ -306,17 +306,8 @@ def stereo_correspondences(
         raise ValueError("no pixel has valid ground truth (disparities and flow).")
     z = focal_baseline / disparity[rows, cols].astype(float)
     z_next = focal_baseline / disparity_next[rows, cols].astype(float)
-    u_next = cols + flow[rows, cols, 0].astype(float)
-    v_next = rows + flow[rows, cols, 1].astype(float)
-    a = np.column_stack([(cols - camera.cx) * z / camera.fx, (rows - camera.cy) * z / camera.fy, z])
-    b = np.column_stack(
-        [
-            (u_next - camera.cx) * z_next / camera.fx,
-            (v_next - camera.cy) * z_next / camera.fy,
-            z_next,
-        ]
-    )
-    return a, b, pixels, valid
+    flowed = pixels + flow[rows, cols].astype(float)
+    return back_project(z, pixels, camera), back_project(z_next, flowed, camera), pixels, valid
 
 
 # --------------------------------------------------------------------------- loader
