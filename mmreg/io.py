@@ -174,17 +174,18 @@ def _extension(path, allowed, what):
     return suffix
 
 
-def _check_readable(path):
-    """``Path(path)``, or FileNotFoundError / ValueError naming it."""
+def _check_readable(path, what=None):
+    """``Path(path)``, or FileNotFoundError / ValueError naming it (and ``what`` it holds)."""
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a str or path-like; got {type(path).__name__}.")
     path = Path(path)
+    holds = f" ({what})" if what else ""
     if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file.")
+        raise FileNotFoundError(f"{path}: no such file{holds}.")
     if path.is_dir():
-        raise ValueError(f"{path}: is a folder, not a file.")
+        raise ValueError(f"{path}: is a folder, not a file{holds}.")
     if not os.access(path, os.R_OK):
-        raise ValueError(f"{path}: cannot be read (permission denied).")
+        raise ValueError(f"{path}: cannot be read (permission denied){holds}.")
     return path
 
 

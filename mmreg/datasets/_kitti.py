@@ -44,6 +44,7 @@ import numpy as np
 from sklearn.utils import Bunch, check_random_state
 
 from mmreg.datasets._camera import back_project, pinhole_camera, sample_pixels
+from mmreg.io import _check_readable
 
 __all__ = ["load_kitti_scene_flow"]
 
@@ -52,15 +53,6 @@ _SPLITS = ("training", "testing")
 
 
 # --------------------------------------------------------------------------- file readers
-def _check_file(path, what):
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file ({what}).")
-    if path.is_dir():
-        raise ValueError(f"{path}: is a folder, not a file ({what}).")
-    return path
-
-
 def _check_png_integrity(path, what):
     """ValueError naming ``path`` unless every chunk's CRC holds and the pixel data are whole.
 
@@ -127,7 +119,7 @@ def read_png(path, what="image"):
     ValueError
         If it is not a PNG file or is corrupt.
     """
-    path = _check_file(path, what)
+    path = _check_readable(path, what)
     with open(path, "rb") as handle:
         head = handle.read(26)
     if len(head) < 26 or not head.startswith(_PNG_SIGNATURE) or head[12:16] != b"IHDR":
@@ -178,7 +170,7 @@ def read_kitti_calibration(path):
     ValueError
         If a matrix is missing or malformed or the baseline is not positive.
     """
-    path = _check_file(path, "calibration")
+    path = _check_readable(path, "calibration")
     entries = {}
     try:
         text = path.read_text(encoding="utf-8")

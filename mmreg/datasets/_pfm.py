@@ -14,24 +14,13 @@ and height as little-endian int32, then ``height * width`` pairs ``(u, v)`` of l
 float32, rows from top to bottom.
 """
 
-from pathlib import Path
-
 import numpy as np
 
-from mmreg.io import atomic_write
+from mmreg.io import _check_readable, atomic_write
 
 __all__ = ["read_flo", "read_pfm", "write_flo", "write_pfm"]
 
 _FLO_MAGIC = 202021.25
-
-
-def _check_file(path):
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file.")
-    if path.is_dir():
-        raise ValueError(f"{path}: is a folder, not a file.")
-    return path
 
 
 def _header_tokens(data, count):
@@ -83,7 +72,7 @@ def read_pfm(path):
     ...     print(read_pfm(Path(folder) / "disparity.pfm").tolist())
     [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]
     """
-    path = _check_file(path)
+    path = _check_readable(path)
     data = path.read_bytes()
     tokens, offset = _header_tokens(data[:256], 4)
     if len(tokens) < 4 or tokens[0] not in (b"PF", b"Pf"):
@@ -190,7 +179,7 @@ def read_flo(path):
     ...     print(read_flo(Path(folder) / "flow.flo")[1, 2].tolist())
     [4.0, -1.0]
     """
-    path = _check_file(path)
+    path = _check_readable(path)
     data = path.read_bytes()
     if len(data) < 12 or np.frombuffer(data[:4], "<f4")[0] != _FLO_MAGIC:
         raise ValueError(f"{path}: is not a .flo file (wrong magic number).")
