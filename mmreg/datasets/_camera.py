@@ -314,6 +314,19 @@ def check_count(value, name, low=0):
     return int(value)
 
 
+def check_image_size(image_size):
+    """``(height, width)`` as positive ints, or ValueError naming ``image_size``."""
+    try:
+        height, width = image_size
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"image_size must be a pair (height, width); got {image_size!r}."
+        ) from None
+    height = check_count(height, "image_size height", low=1)
+    width = check_count(width, "image_size width", low=1)
+    return height, width
+
+
 def observe(
     meshes,
     motions,

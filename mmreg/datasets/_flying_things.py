@@ -15,6 +15,7 @@ from mmreg.datasets._camera import (
     box_mesh,
     check_bool,
     check_count,
+    check_image_size,
     compose_motions,
     invert_motion,
     merge_meshes,
@@ -138,18 +139,6 @@ def _normalise(mesh):
     vertices = vertices - (vertices.min(axis=0) + vertices.max(axis=0)) / 2
     radius = np.linalg.norm(vertices, axis=1).max()
     return vertices / (2 * radius), triangles
-
-
-def _check_image_size(image_size):
-    try:
-        height, width = image_size
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"image_size must be a pair (height, width); got {image_size!r}."
-        ) from None
-    height = check_count(height, "image_size height", low=1)
-    width = check_count(width, "image_size width", low=1)
-    return height, width
 
 
 def _place_objects(diameters, camera, rng):
@@ -287,7 +276,7 @@ def make_flying_things(
     """
     n_objects = check_count(n_objects, "n_objects")
     n_points = check_count(n_points, "n_points", low=1)
-    height, width = _check_image_size(image_size)
+    height, width = check_image_size(image_size)
     shapes, bundled = _check_shapes(shapes)
     sam_masks = check_bool(sam_masks, "sam_masks")
     rng = check_random_state(random_state)

@@ -14,6 +14,7 @@ from mmreg.datasets._camera import (
     box_mesh,
     check_bool,
     check_count,
+    check_image_size,
     compose_motions,
     invert_motion,
     merge_meshes,
@@ -308,14 +309,7 @@ def make_street(
         if n_moving > n_cars:
             raise ValueError(f"n_moving must be at most n_cars={n_cars}; got {n_moving}.")
     n_points = check_count(n_points, "n_points", low=1)
-    try:
-        height, width = image_size
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"image_size must be a pair (height, width); got {image_size!r}."
-        ) from None
-    height = check_count(height, "image_size height", low=1)
-    width = check_count(width, "image_size width", low=1)
+    height, width = check_image_size(image_size)
     sam_masks = check_bool(sam_masks, "sam_masks")
     rng = check_random_state(random_state)
     if n_moving is None:
