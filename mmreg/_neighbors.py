@@ -107,35 +107,23 @@ def minimum_spanning_forest(n_points, edges, lengths):
     return np.column_stack([tree.row[order], tree.col[order]]).astype(np.intp), tree_lengths
 
 
-def _box_gaps(points, components, n_components):
-    """Distance from each point to the nearest bounding box of another component."""
-    order = np.argsort(components, kind="stable")
-    starts = np.searchsorted(components[order], np.arange(n_components))
-    low = np.minimum.reduceat(points[order], starts, axis=0)
-    high = np.maximum.reduceat(points[order], starts, axis=0)
-    gaps = np.full(len(points), np.inf)
-    for c in range(n_components):
-        outside = np.maximum(np.maximum(low[c] - points, points - high[c]), 0)
-        gap = np.sqrt(np.einsum("ij,ij->i", outside, outside))
-        gap[components == c] = np.inf
-        np.minimum(gaps, gap, out=gaps)
-    return gaps
+def _near_other_box(points, components, n_components, reach):
+    """Whether each point lies within ``reach`` (per axis) of another component's box.
 
-
-def _near_other_box(points, components, n_components, max_distance):
-    """Whether each point lies within ``max_distance`` (per axis) of another component's box.
-
-    A per-axis (Chebyshev) test: it keeps every point within ``max_distance`` of another
-    component's bounding box, and a few more near the boxes' corners, which the exact
-    query that follows discards.
+    ``reach`` is one distance or one per point. A per-axis (Chebyshev) test: it keeps
+    every point within ``reach`` of another component's bounding box, and a few more
+    near the boxes' corners, which the exact query that follows discards.
     """
     order = np.argsort(components, kind="stable")
     starts = np.searchsorted(components[order], np.arange(n_components))
-    low = np.minimum.reduceat(points[order], starts, axis=0) - max_distance
-    high = np.maximum.reduceat(points[order], starts, axis=0) + max_distance
+    reach = np.asarray(reach, dtype=float)
+    if reach.ndim:
+        reach = reach[:, None]
+    low = np.minimum.reduceat(points[order], starts, axis=0)
+    high = np.maximum.reduceat(points[order], starts, axis=0)
     near = np.zeros(len(points), dtype=bool)
     for c in range(n_components):
-        inside = np.all((points >= low[c]) & (points <= high[c]), axis=1)
+        inside = np.all((points >= low[c] - reach) & (points <= high[c] + reach), axis=1)
         inside &= components != c
         near |= inside
     return near
@@ -243,8 +231,8 @@ def shortest_edges_between_components(points, components, *, workers=1):
         )
         bound = np.full(n_components, np.inf)
         np.minimum.at(bound, components[source], dist)
-        gaps = _box_gaps(points, components, n_components)
-        candidates = np.flatnonzero(gaps <= bound[components])
+        near = _near_other_box(points, components, n_components, bound[components])
+        candidates = np.flatnonzero(near)
         source, target, dist = nearest_in_other_component(
             points, components, max_distance=bound.max(), sources=candidates, workers=workers
         )
