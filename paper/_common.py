@@ -519,11 +519,18 @@ class _Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescription
     """Defaults shown, the docstring kept as written."""
 
 
-def cache_dir_of(args):
-    """The cache folder the options ask for, or None."""
-    if getattr(args, "no_cache", True):
-        return None
-    return args.cache if args.cache is not None else args.out / "cache"
+def run_with_options(experiments, args):
+    """:func:`run_experiments` with the cache, parallelism and progress the options ask for."""
+    cache_dir = None
+    if not getattr(args, "no_cache", True):
+        cache_dir = args.cache if args.cache is not None else args.out / "cache"
+    return run_experiments(
+        experiments,
+        cache_dir=cache_dir,
+        n_jobs=args.n_jobs,
+        scheduler=args.scheduler,
+        progress=not args.no_progress,
+    )
 
 
 def write_frame(frame, path):

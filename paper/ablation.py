@@ -31,11 +31,10 @@ from _common import (  # noqa: E402
     Experiment,
     add_formats_argument,
     add_runner_arguments,
-    cache_dir_of,
     flow_scene,
     make_parser,
     parse_methods,
-    run_experiments,
+    run_with_options,
     save_figure,
     select_columns,
     write_frame,
@@ -230,13 +229,7 @@ def main(argv=None):
         voxel=args.voxel,
         quick=args.quick,
     )
-    results = run_experiments(
-        chosen,
-        cache_dir=cache_dir_of(args),
-        n_jobs=args.n_jobs,
-        scheduler=args.scheduler,
-        progress=not args.no_progress,
-    )
+    results = run_with_options(chosen, args)
     args.out.mkdir(parents=True, exist_ok=True)
     table = means_markdown(results)
     written = [

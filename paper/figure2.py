@@ -34,12 +34,11 @@ from _common import (
     Experiment,
     add_formats_argument,
     add_runner_arguments,
-    cache_dir_of,
     flow_scene,
     fmt,
     make_parser,
     parse_methods,
-    run_experiments,
+    run_with_options,
     save_figure,
     select_columns,
     write_frame,
@@ -204,13 +203,7 @@ def main(argv=None):
         quick=args.quick,
         datasets=[d.strip() for d in args.datasets.split(",")],
     )
-    results = run_experiments(
-        chosen,
-        cache_dir=cache_dir_of(args),
-        n_jobs=args.n_jobs,
-        scheduler=args.scheduler,
-        progress=not args.no_progress,
-    )
+    results = run_with_options(chosen, args)
     args.out.mkdir(parents=True, exist_ok=True)
     table = medians_markdown(results)
     written = [

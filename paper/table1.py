@@ -35,11 +35,10 @@ from _common import (
     Scene,
     add_runner_arguments,
     best_mask,
-    cache_dir_of,
     fmt,
     make_parser,
     parse_methods,
-    run_experiments,
+    run_with_options,
     select_columns,
     timed_labels,
     write_frame,
@@ -310,13 +309,7 @@ def main(argv=None):
         shapes=args.shapes,
         which=[int(e) for e in args.experiments.split(",")],
     )
-    results = run_experiments(
-        chosen,
-        cache_dir=cache_dir_of(args),
-        n_jobs=args.n_jobs,
-        scheduler=args.scheduler,
-        progress=not args.no_progress,
-    )
+    results = run_with_options(chosen, args)
     summary, methods = summarise(results)
     args.out.mkdir(parents=True, exist_ok=True)
     written = [
