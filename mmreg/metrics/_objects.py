@@ -1,9 +1,9 @@
 """How many true objects an estimate recovers: the count that the paper's IoU hides."""
 
 import numpy as np
-from scipy.sparse import coo_matrix
 
 from mmreg._validation import check_labels
+from mmreg.metrics._clustering import contingency
 
 __all__ = ["objects_found"]
 
@@ -43,20 +43,16 @@ def objects_found(labels_true, labels_pred, *, objects=None, min_iou=0.5):
     """
     truth = check_labels(labels_true, len(np.asarray(labels_true)), name="labels_true")
     pred = check_labels(labels_pred, len(truth), name="labels_pred")
-    keep = pred >= 0
     wanted = np.unique(truth[truth >= 0]) if objects is None else np.asarray(objects)
     if not len(wanted):
         return float("nan")
-    true_ids, t = np.unique(truth, return_inverse=True)
-    pred_ids, p = np.unique(pred[keep], return_inverse=True)
-    overlap = coo_matrix(
-        (np.ones(keep.sum()), (t[keep], p)), shape=(len(true_ids), len(pred_ids))
-    ).toarray()
-    true_sizes = np.bincount(t, minlength=len(true_ids))
-    pred_sizes = np.bincount(p, minlength=len(pred_ids))
-    union = true_sizes[:, None] + pred_sizes[None, :] - overlap
-    with np.errstate(invalid="ignore", divide="ignore"):
-        best = np.where(union > 0, overlap / union, 0.0).max(axis=1, initial=0.0)
+    table = contingency(truth, pred)
+    cluster = table.classes_pred[table.cols] >= 0
+    rows, cols, counts = table.rows[cluster], table.cols[cluster], table.counts[cluster]
+    iou = counts / (table.sizes_true[rows] + table.sizes_pred[cols] - counts)
+    best = np.zeros(len(table.classes_true))
+    np.maximum.at(best, rows, iou)
+    true_ids = table.classes_true
     rows = np.searchsorted(true_ids, wanted)
     present = (rows < len(true_ids)) & (true_ids[np.minimum(rows, len(true_ids) - 1)] == wanted)
     found = np.zeros(len(wanted), dtype=bool)
