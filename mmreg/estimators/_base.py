@@ -8,6 +8,7 @@ from sklearn.base import BaseEstimator, ClusterMixin
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from mmreg._flow import rigid_flow
 from mmreg._gate import ClusterGate
 from mmreg._geometry import degenerate_groups
 from mmreg._likelihood import classify
@@ -33,7 +34,9 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
     * the input, stacked correspondences ``X = [a | b]`` of shape ``(n, 2 * d)``
       (``d = 3`` for point clouds; any ``d >= 1`` works);
     * the fitted layout: ``labels_`` (``-1`` for outliers), ``rotations_`` ``(K, d, d)``,
-      ``translations_`` ``(K, d)``, ``sigmas_``, ``weights_``, ``n_clusters_``;
+      ``translations_`` ``(K, d)``, ``sigmas_``, ``weights_``, ``n_clusters_``, and
+      ``flow_``, the rigid scene flow ``R_j a_i + t_j - a_i`` of every correspondence
+      (an outlier's a-point moves with the cluster of its nearest clustered a-point);
     * :meth:`predict`, which assigns new correspondences to the fitted motions by the
       weighted likelihood of eq. (7), gated by the distance ``tau`` to the fitted
       clusters' a-points (``tau=None``: no gate).
@@ -77,6 +80,7 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         self.sigmas_ = sigmas
         self.weights_ = weights
         self.n_clusters_ = len(rotations)
+        self.flow_ = rigid_flow(a, labels, rotations, translations)
         # predict() measures its gate against these a-points.
         self._cluster_points = a.copy()
         self._warn_if_degenerate(a, labels, self.n_clusters_)

@@ -140,6 +140,10 @@ class MultiModelRegistration(BaseRegistration):
         Number of clusters found.
     outlier_mask_ : ndarray of shape (n_samples,)
         True for the correspondences labelled -1.
+    flow_ : ndarray of shape (n_samples, d)
+        The rigid scene flow of every correspondence, ``R_j a_i + t_j - a_i`` for
+        cluster ``j``. An outlier is a wrong ``b_i``, not a wrong ``a_i``: its a-point
+        moves with the cluster of its nearest clustered a-point (NaN if no cluster).
     init_labels_ : ndarray of shape (n_samples,)
         The initial clusters as given by ``init``.
     n_iter_ : int
