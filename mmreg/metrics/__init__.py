@@ -12,6 +12,15 @@ translations)`` of shapes ``(K, d, d)`` and ``(K, d)``:
 * :func:`ground_truth_poses`: true motions by Horn's method on the true clusters;
 * scorers for ``GridSearchCV`` and ``cross_validate``, and :func:`evaluate`, which
   tabulates several methods on several scenes as a :class:`pandas.DataFrame`.
+
+Functions of scene flow ``(n, d)`` (the estimators' ``flow_``), as the scene-flow
+community defines them:
+
+* :func:`end_point_error` and :func:`scene_flow_metrics` (EPE3D, Acc3DS, Acc3DR,
+  Outliers3D of HPLFlowNet and PointPWC-Net);
+* :func:`dynamic_mask`, :func:`three_way_epe` and :func:`dynamic_iou` (Argoverse 2's
+  scene-flow challenge); :func:`make_end_point_error_scorer` and
+  :func:`scene_flow_scorers` score ``flow_`` against the true flow as ``y``.
 """
 
 from sklearn.metrics import adjusted_rand_score
@@ -21,6 +30,15 @@ from mmreg.metrics._evaluate import evaluate
 from mmreg.metrics._objects import objects_found
 from mmreg.metrics._point import chamfer_distance, per_point_error
 from mmreg.metrics._pose import ground_truth_poses, rotation_error, translation_error
+from mmreg.metrics._scene_flow import (
+    dynamic_iou,
+    dynamic_mask,
+    end_point_error,
+    make_end_point_error_scorer,
+    scene_flow_metrics,
+    scene_flow_scorers,
+    three_way_epe,
+)
 from mmreg.metrics._scorer import (
     make_iou_scorer,
     make_misclassification_scorer,
@@ -33,9 +51,13 @@ from mmreg.metrics._scorer import (
 __all__ = [
     "adjusted_rand_score",
     "chamfer_distance",
+    "dynamic_iou",
+    "dynamic_mask",
+    "end_point_error",
     "evaluate",
     "ground_truth_poses",
     "iou_score",
+    "make_end_point_error_scorer",
     "make_iou_scorer",
     "make_misclassification_scorer",
     "make_per_point_error_scorer",
@@ -46,5 +68,8 @@ __all__ = [
     "per_point_error",
     "registration_scorers",
     "rotation_error",
+    "scene_flow_metrics",
+    "scene_flow_scorers",
+    "three_way_epe",
     "translation_error",
 ]
