@@ -4,6 +4,13 @@ One module per family of scenes; every generator returns a :class:`sklearn.utils
 and is seeded by ``random_state``.
 """
 
+from mmreg.datasets._argoverse2 import (
+    ARGOVERSE2_CATEGORIES,
+    Argoverse2Log,
+    load_argoverse2,
+    read_scene_flow,
+    write_argoverse2_log,
+)
 from mmreg.datasets._flow_noise import corrupt_scene_flow
 from mmreg.datasets._flying_things import PRIMITIVES, make_flying_things
 from mmreg.datasets._flying_things_data import load_flying_things
@@ -17,12 +24,15 @@ from mmreg.datasets._wrong_matches import add_wrong_correspondences
 from mmreg.io import read_correspondences as load_correspondences
 
 __all__ = [
+    "ARGOVERSE2_CATEGORIES",
+    "Argoverse2Log",
     "MESH_NAMES",
     "PRIMITIVES",
     "SHAPES",
     "SURFACE_KINDS",
     "add_wrong_correspondences",
     "corrupt_scene_flow",
+    "load_argoverse2",
     "load_correspondences",
     "load_flying_things",
     "load_kitti_scene_flow",
@@ -31,6 +41,8 @@ __all__ = [
     "make_scene",
     "make_street",
     "read_pfm",
+    "read_scene_flow",
     "simulate_sam_masks",
+    "write_argoverse2_log",
     "write_pfm",
 ]
