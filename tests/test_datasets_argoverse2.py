@@ -328,7 +328,7 @@ def test_sequence_interface(log, tmp_path_factory):
 
 def test_index_and_option_errors(log):
     folder, _ = log
-    with pytest.raises(ValueError, match="index 1 out of range"):
+    with pytest.raises(ValueError, match=r"index 1 out of range.*\(index 0 to 0\)"):
         load_argoverse2(folder, 1)
     with pytest.raises(ValueError, match="out of range"):
         load_argoverse2(folder, -1)
@@ -476,6 +476,9 @@ def test_read_scene_flow_rejects_bad_files(tmp_path):
     (tmp_path / "cut.feather").write_bytes(data[:-100])
     with pytest.raises(ValueError, match="cut.feather: cannot be read as a feather file"):
         read_scene_flow(tmp_path / "cut.feather")
+    np.savez(tmp_path / "valid.npz", flow=np.zeros((4, 3)), is_valid=np.ones(3, bool))
+    with pytest.raises(ValueError, match="valid.npz: is_valid must hold 4 booleans"):
+        read_scene_flow(tmp_path / "valid.npz")
     (tmp_path / "flow.csv").write_text("0,0,0\n")
     with pytest.raises(ValueError, match="unknown extension"):
         read_scene_flow(tmp_path / "flow.csv")

@@ -444,10 +444,11 @@ def _check_index(log, index, timestamp_ns):
         index = int(where[0])
     index = _check_int(index, "index")
     if not 0 <= index < n_pairs:
+        allowed = f"index 0 to {n_pairs - 1}" if n_pairs else "no index is valid"
         raise ValueError(
             f"{log.log_dir}: index {index} out of range; the log has {len(log.sweep_timestamps)} "
-            f"sweep(s) and {n_pairs} sweep pair(s) (index 0 to {n_pairs - 1})."
-            + (" The last sweep has no next sweep nor later annotation." if n_pairs else "")
+            f"sweep(s) and {n_pairs} sweep pair(s) ({allowed}): the last sweep has no next "
+            "sweep nor a later annotated timestamp."
         )
     return index
 
@@ -936,14 +937,15 @@ def read_scene_flow(path, n=None, *, return_valid=False):
         raise ValueError(
             f"{path}: the flow holds NaN or infinity ({len(bad)} rows, the first is row {bad[0]})."
         )
-    if not return_valid:
-        return flow
     if valid is None:
         valid = np.ones(len(flow), dtype=bool)
     valid = np.asarray(valid)
     if valid.shape != (len(flow),) or valid.dtype.kind not in "biu":
-        raise ValueError(f"{path}: is_valid must be {len(flow)} booleans; got {valid.shape}.")
-    return flow, valid.astype(bool)
+        raise ValueError(
+            f"{path}: is_valid must hold {len(flow)} booleans; got shape {valid.shape}, "
+            f"dtype {valid.dtype}."
+        )
+    return (flow, valid.astype(bool)) if return_valid else flow
 
 
 # --------------------------------------------------------------------------- writer
