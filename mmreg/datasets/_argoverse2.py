@@ -126,7 +126,7 @@ ego-vehicle frame at t, ``b = a + flow`` and ``sweep2`` in the ego-vehicle frame
 :Ground: the map rule of the AV2 API: within 0.3 m of the ground height raster, or
     below it.
 :Licence: data CC BY-NC-SA 4.0 (non-commercial research use, attribution,
-    share-alike); https://www.argoverse.org/about.html#terms-of-use
+    share-alike); see https://www.argoverse.org
 
 References: B. Wilson et al., "Argoverse 2: Next Generation Datasets for
 Self-Driving Perception and Forecasting", NeurIPS Datasets and Benchmarks, 2021.
@@ -715,7 +715,8 @@ def load_argoverse2(
     B. Wilson et al., "Argoverse 2: Next Generation Datasets for Self-Driving Perception
     and Forecasting", NeurIPS Datasets and Benchmarks, 2021.
     The official labels: ``av2/torch/structures/flow.py`` in
-    https://github.com/argoverse/av2-api.
+    https://github.com/argoverse/av2-api; the task:
+    https://argoverse.github.io/user-guide/tasks/3d_scene_flow.html
 
     Examples
     --------
