@@ -1,0 +1,153 @@
+"""benchmarks/real.py end to end on a small fake data folder (no real data needed)."""
+
+import importlib.util
+import sys
+import textwrap
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# A stand-in for the data folder's load.py: two generated scenes named like real ones, so
+# that the benchmark makes the same variants (ZeroFlow + ground truth; ground truth +
+# noisy) and finds the same foreground / dynamic information.
+FAKE_LOADER = """
+from types import SimpleNamespace
+
+import numpy as np
+
+from mmreg.datasets import make_scene
+
+SCENES = ("icpflow_av2_demo", "av2_api_7fab2350")
+
+
+def list_scenes(root=None, real_only=False):
+    return list(SCENES)
+
+
+def load_scene(name, root=None, drop_ground=False, **kwargs):
+    seed = SCENES.index(name)
+    s = make_scene(n_objects=3, n_points=600, object_size=2.0, separation=3.0,
+                   random_state=seed)
+    labels = s.labels.copy()
+    a = s.a
+    b = np.where((labels == 0)[:, None], a, s.b)  # object 0 is the static world
+    flow = b - a
+    labels[:5] = -1                               # unknown motion: kept, not scored
+    ground = np.zeros(len(a), bool)
+    ground[5:25] = True                           # dropped with drop_ground=True
+    transforms = np.tile(np.eye(4), (3, 1, 1))
+    transforms[1:, :3, :3] = s.rotations[1:]
+    transforms[1:, :3, 3] = s.translations[1:]
+    moving = labels >= 1
+    foreground = moving.copy()
+    foreground[25:60] = True                      # a parked car in the static world
+    if name == "icpflow_av2_demo":
+        rng = np.random.default_rng(0)
+        extras = {
+            "classes": np.where(foreground, 18, -1),
+            "est_flow_zeroflow": flow * np.where(moving, 0.9, 1.0)[:, None]
+            + rng.normal(scale=0.01, size=flow.shape),
+        }
+    else:
+        extras = {"category": np.where(foreground, 19, 0).astype(np.uint8), "dynamic": moving}
+    keep = ~ground if drop_ground else np.ones(len(a), bool)
+    extras = {k: v[keep] for k, v in extras.items()}
+    return SimpleNamespace(
+        name=name, a=a[keep], b=b[keep], flow=flow[keep], labels=labels[keep],
+        transforms=transforms, ground=ground[keep], valid=None, pc2=None, real=True,
+        labels_kind="generated", meta={"dt_s": 0.1}, extras=extras,
+    )
+"""
+
+
+@pytest.fixture(scope="module")
+def real_benchmark():
+    spec = importlib.util.spec_from_file_location("benchmark_real", ROOT / "benchmarks/real.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("benchmark_real", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture
+def fake_data(tmp_path):
+    data = tmp_path / "realdata"
+    data.mkdir()
+    (data / "load.py").write_text(textwrap.dedent(FAKE_LOADER))
+    return data
+
+
+def test_benchmark_on_fake_data(real_benchmark, fake_data, tmp_path, capsys):
+    out = tmp_path / "results"
+    assert real_benchmark.main(["--data", str(fake_data), "--out", str(out)]) == 0
+    table = pd.read_csv(out / "real.csv")
+    scenes = [
+        "icpflow_av2_demo/zeroflow",
+        "icpflow_av2_demo/gt",
+        "av2_api_7fab2350/gt",
+        "av2_api_7fab2350/noisy",
+    ]
+    methods = ["mmreg", "paper", "naive", "sequential_ransac", "t_linkage"]
+    assert list(table["scene"].unique()) == scenes
+    assert list(table["method"].unique()) == methods
+    assert len(table) == len(scenes) * len(methods)
+    for column in (
+        "n", "time_s", "clusters", "moving_found", "moving_total", "static_in_largest",
+        "static_moving", "moving_from", "iou", "epe_in", "epe", "acc3ds", "acc3dr",
+        "outliers3d", "3way_in", "3way", "fd", "fs", "bs", "dyn_iou", "epe_obj_in",
+        "epe_obj", "epe_objects", "labelled_-1",
+    ):  # fmt: skip
+        assert column in table, column
+    assert (table["n"] == 600 - 20).all()  # ground dropped, unknown points kept
+    assert (table["moving_total"] == 2).all()
+    # Scores are defined everywhere on these scenes; the ground-truth input has no error.
+    assert table[["iou", "epe", "3way", "fd", "fs", "bs", "static_in_largest"]].notna().all().all()
+    gt = table["scene"].str.endswith("/gt")
+    assert (table.loc[gt, "epe_in"] < 1e-9).all()
+    assert (table.loc[~gt, "epe_in"] > 0.005).all()
+    markdown = (out / "real.md").read_text()
+    assert "| scene" in markdown and "av2_api_7fab2350/noisy" in markdown
+    assert "3-way" in capsys.readouterr().out
+
+
+def test_benchmark_options(real_benchmark, fake_data, tmp_path, capsys):
+    out = tmp_path / "results"
+    argv = ["--data", str(fake_data), "--out", str(out), "--methods", "paper,naive"]
+    argv += ["--scenes", "av2_api_7fab2350/noisy,flyout_ft3d_0000710", "--seeds", "2"]
+    assert real_benchmark.main(argv) == 0
+    table = pd.read_csv(out / "real.csv")
+    assert set(table["scene"]) == {"av2_api_7fab2350/noisy"}
+    assert sorted(table["method"]) == ["naive", "naive", "paper", "paper"]
+    assert sorted(table["seed"]) == [0, 0, 1, 1]
+    # Each seed draws its own noise.
+    assert table.groupby("seed")["epe_in"].first().nunique() == 2
+    assert "flyout_ft3d_0000710: not in the data folder" in capsys.readouterr().out
+
+
+def test_benchmark_without_data(real_benchmark, tmp_path, capsys):
+    out = tmp_path / "results"
+    assert real_benchmark.main(["--data", str(tmp_path / "absent"), "--out", str(out)]) == 0
+    assert "no load.py" in capsys.readouterr().out
+    assert not out.exists()
+
+
+def test_unknown_method(real_benchmark, fake_data):
+    with pytest.raises(SystemExit, match="unknown method"):
+        real_benchmark.main(["--data", str(fake_data), "--methods", "nonsense"])
+
+
+def test_ablation_runs_or_says_why(real_benchmark, fake_data, tmp_path, capsys):
+    out = tmp_path / "results"
+    argv = ["--data", str(fake_data), "--out", str(out), "--ablation"]
+    argv += ["--scenes", "av2_api_7fab2350/gt"]
+    assert real_benchmark.main(argv) == 0
+    steps, why = real_benchmark.robust_steps()
+    if steps is None:
+        assert "Ablation skipped" in capsys.readouterr().out
+        assert not out.exists()
+    else:
+        table = pd.read_csv(out / "real_ablation.csv")
+        assert list(table["method"]) == ["mmreg", *(f"mmreg-no-{s}" for s in steps)]
