@@ -1,10 +1,10 @@
 """Reading and writing correspondences, labels, motions and point clouds.
 
 Every reader checks its file and raises one clear error that names it: ``FileNotFoundError``
-when it is missing, ``ValueError`` when it is unreadable, corrupt, of the wrong shape, holds
-NaN or infinity, or has an unknown extension, ``TypeError`` when it holds the wrong kind of
-values (text where numbers belong, non-integer labels). Every writer goes through
-:func:`atomic_write`: the file appears whole or not at all.
+when it is missing, ``ValueError`` when it is unreadable, corrupt, truncated, has bytes
+after its end, the wrong shape, NaN or infinity, or an unknown extension, ``TypeError``
+when it holds the wrong kind of values (text where numbers belong, non-integer labels).
+Every writer goes through :func:`atomic_write`: the file appears whole or not at all.
 
 File formats
 ------------
@@ -18,15 +18,52 @@ labels
 motions
     JSON: a list with one object per motion (see :func:`write_motions`).
 point clouds
-    ``.ply`` and ``.pcd`` through Open3D; ``.xyz`` (``x y z`` per line) as text; ``.npy`` /
-    ``.csv`` / ``.txt`` ``(n, 3)`` arrays for reading.
+    ``.ply`` (ascii, binary little or big endian; the ``vertex`` element's ``x``, ``y``,
+    ``z`` and ``red``, ``green``, ``blue``) and ``.pcd`` (``ascii``, ``binary``,
+    ``binary_compressed``; ``x``, ``y``, ``z`` and packed ``rgb``), read and written by
+    mmreg itself (the files agree with Open3D's); ``.xyz`` (``x y z`` per line) as text;
+    ``.npy`` / ``.csv`` / ``.txt`` ``(n, 3)`` arrays for reading.
+
+Text tables
+-----------
+Blank lines are skipped; lines starting with ``#`` are comments, allowed only before the
+data. The first line is a header when none of its fields is a number (a line mixing
+names and numbers is an error). The last line must end with a line break.
+
+What a damaged file gives
+-------------------------
+No reader zero-fills, shortens or pads data silently. What each format can detect
+follows from what it stores (``tests/test_io_fuzz.py`` checks it on thousands of
+damaged files):
+
+* cut short: an error for every format whose header counts its data (``.npy``,
+  ``.npz``, ``.ply``, ``.pcd``, and the loaders' ``.png``, ``.pfm``, ``.flo``; the error
+  names how many vertices or points the header promised and how many were read). A text
+  table (``.csv``, ``.txt``, ``.xyz``) holds no count: a cut inside a line is an error
+  (the last line must end with a line break), a cut exactly at a line end leaves a
+  valid shorter table (``mmreg register`` then finds the files' lengths differ when
+  another file is read with it);
+* bytes appended after the end: an error for every binary format and every format with
+  a count; for a text table an error unless they form whole valid rows;
+* a changed byte: ``.npz`` (a CRC-32 per array) and ``.png`` (a CRC-32 per chunk) detect
+  it (an error, or the data are unchanged). A changed byte in the header of the other
+  formats is an error or leaves a valid header (e.g. the byte order of a ``.npy`` or
+  ``.pfm``); in their values it cannot be detected: raw binary (``.npy``, binary
+  ``.ply`` / ``.pcd``, ``.pfm``, ``.flo``) keeps the shape but may change a value; text
+  changes at most one number (a digit, sign or exponent), or, in a one-column table,
+  the number of rows by one. Values that become NaN or infinite are always an error.
 """
 
 import contextlib
+import io
 import json
+import math
 import os
+import struct
 import tempfile
 import warnings
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -220,29 +257,98 @@ def _check_correspondence_array(X, source="X"):
 
 
 # --------------------------------------------------------------------------- readers
-def _load_npy(path):
+def _read_bytes(path):
     try:
-        return np.load(path, allow_pickle=False)
-    except ValueError as exc:
+        return Path(path).read_bytes()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot be read: {exc}") from exc
+
+
+def _parse_npy(data, source):
+    """The array held by the bytes of a ``.npy`` file, checked strictly.
+
+    The header must parse, describe numbers (no Python objects), and announce exactly
+    the number of bytes that follow it: a truncated file or one with bytes appended is an
+    error, never a zero-filled or silently shortened array.
+    """
+    from numpy.lib import format as npy_format
+
+    handle = io.BytesIO(data)
+    try:
+        version = npy_format.read_magic(handle)
+        if version == (1, 0):
+            shape, fortran, dtype = npy_format.read_array_header_1_0(handle)
+        elif version == (2, 0):
+            shape, fortran, dtype = npy_format.read_array_header_2_0(handle)
+        else:
+            reader = getattr(npy_format, "_read_array_header", None)
+            if reader is None:
+                raise ValueError(f"unsupported .npy format version {version}")
+            shape, fortran, dtype = reader(handle, version)
+    except (ValueError, TypeError, SyntaxError, KeyError, IndexError, OverflowError) as exc:
         raise ValueError(
-            f"{path}: cannot be read as a .npy array of numbers (corrupt, or it holds Python "
-            f"objects): {exc}"
+            f"{source}: cannot be read as a .npy array (corrupt header?): {_one_line(exc)}"
         ) from exc
-    except (OSError, EOFError) as exc:
-        raise ValueError(f"{path}: cannot be read as a .npy file (corrupt?): {exc}") from exc
+    if dtype.hasobject:
+        raise ValueError(
+            f"{source}: cannot be read as a .npy array of numbers: it holds Python objects."
+        )
+    offset = handle.tell()
+    count = math.prod(shape)
+    expected = count * dtype.itemsize
+    found = len(data) - offset
+    if found != expected:
+        raise ValueError(
+            f"{source}: corrupt .npy file: its header announces an array of shape {shape} "
+            f"({expected:,} bytes of data) but {found:,} bytes follow the header"
+            + (" (truncated)." if found < expected else " (extra bytes at the end).")
+        )
+    array = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
+    return array.reshape(shape, order="F" if fortran else "C")
+
+
+def _load_npy(path):
+    return _parse_npy(_read_bytes(path), path)
+
+
+def _check_zip_end(data, source):
+    """ValueError unless ``data`` ends exactly with a zip archive's end record."""
+    start = max(0, len(data) - 22 - 0xFFFF)
+    end = data.rfind(b"PK\x05\x06", start)
+    if end < 0 or end + 22 > len(data):
+        raise ValueError(f"{source}: cannot be read as a .npz file (corrupt or truncated).")
+    (comment,) = struct.unpack("<H", data[end + 20 : end + 22])
+    if end + 22 + comment != len(data):
+        raise ValueError(
+            f"{source}: corrupt .npz file: {len(data) - end - 22 - comment:+,} bytes after the "
+            "end of the zip archive."
+        )
 
 
 def _load_npz(path):
+    """``{key: array}`` of an ``.npz`` archive; every member's CRC-32 is checked."""
+    data = _read_bytes(path)
+    _check_zip_end(data, path)
+    arrays = {}
     try:
-        with np.load(path, allow_pickle=False) as archive:
-            return {key: archive[key] for key in archive.files}
-    except ValueError as exc:
-        raise ValueError(
-            f"{path}: cannot be read as a .npz archive of numeric arrays (corrupt, or it "
-            f"holds Python objects): {exc}"
-        ) from exc
-    except (OSError, EOFError, KeyError) as exc:  # zipfile.BadZipFile is an OSError
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
+            for name in archive.namelist():
+                if not name.endswith(".npy"):
+                    raise ValueError(f"member {name!r} is not a .npy array")
+                arrays[name[: -len(".npy")]] = _parse_npy(archive.read(name), f"{path}[{name}]")
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, NotImplementedError) as exc:
         raise ValueError(f"{path}: cannot be read as a .npz file (corrupt?): {exc}") from exc
+    except (ValueError, KeyError, UnicodeDecodeError, struct.error) as exc:
+        message = _one_line(exc)
+        if str(path) not in message:
+            message = f"{path}: cannot be read as a .npz archive of numeric arrays: {message}"
+        raise ValueError(message) from exc
+    return arrays
+
+
+def _one_line(error):
+    """The message of ``error`` on one line."""
+    return " ".join(str(error).split())
 
 
 def _is_number(token):
@@ -253,68 +359,506 @@ def _is_number(token):
     return True
 
 
-def _load_text_table(path):
-    """A 2-D float array from a comma, space or tab delimited file, header row optional.
-
-    Blank lines and lines starting with ``#`` are skipped. The delimiter is a comma when
-    the first data line holds one, otherwise any run of spaces and tabs. The first line is
-    a header when any of its fields is not a number.
-    """
+def _decode_text(data, source):
+    """The text of a UTF-8 file (a byte-order mark is dropped), newlines normalised."""
     try:
-        with open(path, encoding="utf-8") as handle:
-            first, skip = None, 0
-            for line in handle:
-                skip += 1
-                if line.strip() and not line.lstrip().startswith("#"):
-                    first = line
-                    break
+        text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise ValueError(f"{path}: is not a text file (not UTF-8): {exc}") from exc
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot be read: {exc}") from exc
-    if first is None:
-        raise ValueError(f"{path}: holds no rows; at least one is needed.")
-    delimiter = "," if "," in first else None
-    fields = [f.strip() for f in first.split(delimiter)]
-    header = not all(_is_number(f) for f in fields)
+        raise ValueError(f"{source}: is not a text file (not UTF-8): {exc}") from exc
+    if "\x00" in text:
+        raise ValueError(f"{source}: is not a text file (it holds NUL bytes).")
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+def _split_fields(line, delimiter):
+    return [f.strip() for f in line.split(delimiter)] if delimiter else line.split()
+
+
+def _require_final_newline(text, source):
+    if text.rstrip(" \t") and not text.rstrip(" \t").endswith("\n"):
+        raise ValueError(
+            f"{source}: the last line does not end with a line break, so the file may have "
+            "been cut short; if it is complete, add a line break at its end."
+        )
+
+
+def _parse_rows(lines, first_line, delimiter, source):
+    """A 2-D float array from text rows; errors name the line (``first_line`` is line 1's)."""
+    rows = [line for line in lines if line.strip()]
+    if not rows:
+        return np.zeros((0, 0))
     try:
-        with warnings.catch_warnings():  # "input contained no data": reported below
-            warnings.simplefilter("ignore", UserWarning)
-            array = np.loadtxt(
-                path,
-                delimiter=delimiter,
-                skiprows=skip if header else skip - 1,
-                ndmin=2,
-                comments="#",
-                encoding="utf-8",
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return np.loadtxt(rows, delimiter=delimiter, comments=None, ndmin=2, dtype=float)
+    except ValueError:
+        pass
+    # Find and name the offending line (slow, only on error).
+    width = None
+    for number, line in enumerate(lines, start=first_line):
+        if not line.strip():
+            continue
+        fields = _split_fields(line, delimiter)
+        if width is None:
+            width = len(fields)
+        if len(fields) != width:
+            raise ValueError(
+                f"{source}: line {number} has {len(fields)} values but the lines before "
+                f"have {width} (rows of different lengths, or a damaged line)."
             )
-    except ValueError as exc:
-        if "could not convert" in str(exc):
-            raise TypeError(f"{path}: holds a value that is not a number: {exc}") from exc
-        raise ValueError(f"{path}: rows of different lengths or malformed: {exc}") from exc
-    if array.size == 0:
-        raise ValueError(f"{path}: holds no rows after the header; at least one is needed.")
+        for field in fields:
+            if not _is_number(field):
+                raise TypeError(f"{source}: line {number} holds {field!r}, which is not a number.")
+    raise ValueError(f"{source}: malformed rows.")  # pragma: no cover - loadtxt agreed
+
+
+def _parse_text_table(data, source):
+    """A 2-D float array from the bytes of a comma, space or tab delimited text file.
+
+    Blank lines are skipped; lines starting with ``#`` are comments, allowed only before
+    the data (a ``#`` among the data rows is an error: it could hide a damaged row). The
+    delimiter is a comma when the first data line holds one, otherwise any run of spaces
+    and tabs. The first line is a header when none of its fields is a number; a first
+    line mixing numbers and text is an error. The last line must end with a line break.
+    """
+    text = _decode_text(data, source)
+    lines = text.split("\n")
+    header = None
+    delimiter = None
+    start = None
+    for index, line in enumerate(lines):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            rest = stripped.lstrip("#").replace(",", " ").split()
+            if rest and all(_is_number(token) for token in rest):
+                raise ValueError(
+                    f"{source}: line {index + 1} is a comment holding only numbers (a damaged "
+                    "data row?); remove it or put words in it."
+                )
+            continue
+        delimiter = "," if "," in line else None
+        fields = _split_fields(line, delimiter)
+        numeric = [_is_number(field) for field in fields]
+        if all(numeric):
+            start = index
+            break
+        if not any(numeric) and header is None:
+            header = index
+            continue
+        word = next(f for f, is_number in zip(fields, numeric, strict=True) if not is_number)
+        raise TypeError(
+            f"{source}: line {index + 1} holds {word!r}, which is not a number"
+            + (
+                " (a header row must hold names only, a data row numbers only)."
+                if any(numeric)
+                else " (a second header row?)."
+            )
+        )
+    if start is None:
+        after = " after the header" if header is not None else ""
+        raise ValueError(f"{source}: holds no rows{after}; at least one is needed.")
+    _require_final_newline(text, source)
+    position = sum(len(line) + 1 for line in lines[:start])
+    comment = text.find("#", position)
+    if comment >= 0:
+        number = text.count("\n", 0, comment) + 1
+        raise ValueError(
+            f"{source}: line {number} holds '#' among the data rows; comments are allowed "
+            "only before the data."
+        )
+    array = _parse_rows(lines[start:], start + 1, delimiter, source)
+    if array.size == 0:  # pragma: no cover - start is a data row
+        raise ValueError(f"{source}: holds no rows; at least one is needed.")
     return array
 
 
-def _read_cloud_file(path, *, colors=False):
-    """Points (and colours or None) of a ``.ply``/``.pcd`` (Open3D) or ``.xyz`` file."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".xyz":
-        # Open3D's xyz reader silently skips malformed lines; numpy reports them.
-        return _load_text_table(path), None
-    import open3d as o3d
+def _load_text_table(path):
+    return _parse_text_table(_read_bytes(path), path)
 
-    cloud = o3d.io.read_point_cloud(
-        str(path), format="auto", remove_nan_points=False, remove_infinite_points=False
-    )
-    points = np.asarray(cloud.points, dtype=float)
-    if len(points) == 0:
+
+# PLY scalar types (both spellings) and PCD (TYPE, SIZE) pairs as numpy types.
+_PLY_TYPES = {
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
+}
+_MAX_HEADER = 1 << 20
+
+
+def _header_lines(data, source, end_marker, kind):
+    """The header lines of a PLY or PCD file and the offset of the data after it."""
+    lines, position = [], 0
+    while True:
+        newline = data.find(b"\n", position, position + _MAX_HEADER)
+        if newline < 0:
+            raise ValueError(
+                f"{source}: not a {kind} point cloud, or its header is cut short (no "
+                f"{end_marker!r} line): no points could be read."
+            )
+        raw = data[position:newline]
+        position = newline + 1
+        try:
+            line = raw.decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise ValueError(
+                f"{source}: not a {kind} point cloud (its header holds binary bytes): no "
+                "points could be read."
+            ) from None
+        lines.append(line)
+        if line.split()[:1] == [end_marker]:
+            return lines, position
+        if len(lines) > 10_000:
+            raise ValueError(f"{source}: {kind} header without an end: no points could be read.")
+
+
+def _colour_scale(dtype):
+    dtype = np.dtype(dtype)
+    return float(np.iinfo(dtype).max) if dtype.kind in "iu" else 1.0
+
+
+def _points_and_colours(fields, source, what):
+    """``(points, rgb or None)`` from ``{name: column}`` holding x, y, z (and colours)."""
+    missing = [name for name in "xyz" if name not in fields]
+    if missing:
+        raise ValueError(f"{source}: the {what} have no {', '.join(missing)} coordinate.")
+    points = np.column_stack([np.asarray(fields[name], dtype=float) for name in "xyz"])
+    for names in (("red", "green", "blue"), ("r", "g", "b")):
+        if all(name in fields for name in names):
+            columns = [np.asarray(fields[name]) for name in names]
+            rgb = np.column_stack([c / _colour_scale(c.dtype) for c in columns]).astype(float)
+            return points, rgb
+    return points, None
+
+
+def _parse_ply(data, source):
+    """Points and colours of a PLY file (ascii, binary little or big endian), strictly.
+
+    Every element the header declares must be present, whole, and followed by nothing:
+    a file cut short names how many vertices the header promised and how many were read.
+    """
+    if not (data.startswith(b"ply\n") or data.startswith(b"ply\r\n")):
         raise ValueError(
-            f"{path}: no points could be read (corrupt, empty, or not a {suffix} point cloud)."
+            f"{source}: not a PLY file (no 'ply' line first): no points could be read."
         )
-    rgb = np.asarray(cloud.colors, dtype=float) if (colors and cloud.has_colors()) else None
+    lines, offset = _header_lines(data, source, "end_header", "PLY")
+    form, elements = None, []
+    for number, line in enumerate(lines[1:-1], start=2):
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        try:
+            if words[0] == "format":
+                form = {"ascii": "ascii", "binary_little_endian": "<", "binary_big_endian": ">"}[
+                    words[1]
+                ]
+            elif words[0] == "element":
+                if len(words) != 3 or int(words[2]) < 0:
+                    raise ValueError
+                elements.append((words[1], int(words[2]), []))
+            elif words[0] == "property":
+                if words[1] == "list":
+                    if len(words) != 5:
+                        raise ValueError
+                    prop = (words[4], _PLY_TYPES[words[2]], _PLY_TYPES[words[3]])
+                else:
+                    if len(words) != 3:
+                        raise ValueError
+                    prop = (words[2], _PLY_TYPES[words[1]], None)
+                elements[-1][2].append(prop)
+            else:
+                raise ValueError
+        except (ValueError, KeyError, IndexError):
+            raise ValueError(
+                f"{source}: malformed PLY header, line {number}: {line[:80]!r}."
+            ) from None
+    if form is None:
+        raise ValueError(f"{source}: malformed PLY header: no 'format' line.")
+    vertex = next((e for e in elements if e[0] == "vertex"), None)
+    if vertex is None:
+        raise ValueError(f"{source}: the PLY header declares no 'vertex' element: no points.")
+    if form == "ascii":
+        fields = _ply_ascii_body(data, offset, elements, source)
+    else:
+        fields = _ply_binary_body(data, offset, elements, form, source)
+    return _points_and_colours(fields, source, "PLY vertices")
+
+
+def _short_elements(source, name, promised, read):
+    what = "vertices" if name == "vertex" else f"'{name}' elements"
+    return ValueError(
+        f"{source}: truncated PLY file: the header promised {promised:,} {what} but "
+        f"{read:,} were read."
+    )
+
+
+def _ply_binary_body(data, offset, elements, order, source):
+    vertex_fields = None
+    for name, count, props in elements:
+        if all(p[2] is None for p in props):
+            dtype = np.dtype([(p[0], order + p[1]) for p in props])
+            size = count * dtype.itemsize
+            if offset + size > len(data):
+                read = (len(data) - offset) // dtype.itemsize if dtype.itemsize else count
+                raise _short_elements(source, name, count, read)
+            if name == "vertex":
+                block = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
+                vertex_fields = {p[0]: block[p[0]].astype(p[1]) for p in props}
+            offset += size
+        else:
+            offset = _skip_binary_lists(data, offset, name, count, props, order, source)
+    if offset != len(data):
+        raise ValueError(
+            f"{source}: corrupt PLY file: {len(data) - offset:,} bytes follow the last "
+            "element the header declares."
+        )
+    return vertex_fields
+
+
+def _skip_binary_lists(data, offset, name, count, props, order, source):
+    """The offset after ``count`` binary rows holding list properties (faces, say)."""
+    for row in range(count):
+        for _, item, list_type in props:
+            if list_type is None:
+                offset += np.dtype(item).itemsize
+                continue
+            size = np.dtype(item).itemsize
+            if offset + size > len(data):
+                raise _short_elements(source, name, count, row)
+            length = int(np.frombuffer(data, order + item, count=1, offset=offset)[0])
+            if length < 0:
+                raise ValueError(f"{source}: corrupt PLY file: a negative list length.")
+            offset += size + length * np.dtype(list_type).itemsize
+        if offset > len(data):
+            raise _short_elements(source, name, count, row)
+    return offset
+
+
+def _ply_ascii_body(data, offset, elements, source):
+    text = _decode_text(data[offset:], source)
+    _require_final_newline(text, source)
+    lines = [line for line in text.split("\n") if line.strip()]
+    position, vertex_fields = 0, None
+    for name, count, props in elements:
+        rows = lines[position : position + count]
+        if len(rows) < count:
+            raise _short_elements(source, name, count, len(rows))
+        if name == "vertex":
+            if any(p[2] is not None for p in props):
+                raise ValueError(f"{source}: PLY vertices with list properties are not supported.")
+            table = _parse_rows(rows, 1, None, source)
+            if table.shape != (count, len(props)):
+                raise ValueError(
+                    f"{source}: corrupt PLY file: {len(props)} values per vertex expected, "
+                    f"got rows of {table.shape[1]}."
+                )
+            vertex_fields = {}
+            for column, (prop, item, _) in enumerate(props):
+                values = table[:, column]
+                if np.dtype(item).kind in "iu":
+                    info = np.iinfo(item)
+                    if np.any(values != np.round(values)) or np.any(
+                        (values < info.min) | (values > info.max)
+                    ):
+                        raise ValueError(
+                            f"{source}: corrupt PLY file: vertex property {prop!r} holds a "
+                            f"value that is not a {item}."
+                        )
+                vertex_fields[prop] = values.astype(item)
+        position += count
+    if position != len(lines):
+        raise ValueError(
+            f"{source}: corrupt PLY file: {len(lines) - position:,} lines follow the last "
+            "element the header declares."
+        )
+    return vertex_fields
+
+
+def _lzf_decompress(data, size, source):
+    """LZF-decompress ``data`` (PCD's ``binary_compressed``) into exactly ``size`` bytes."""
+    out = bytearray(size)
+    i = o = 0
+    n = len(data)
+    try:
+        while i < n:
+            control = data[i]
+            i += 1
+            if control < 32:  # a run of control + 1 literal bytes
+                length = control + 1
+                if i + length > n or o + length > size:
+                    raise IndexError
+                out[o : o + length] = data[i : i + length]
+                i += length
+                o += length
+                continue
+            length = control >> 5
+            ref = o - ((control & 0x1F) << 8) - 1
+            if length == 7:
+                length += data[i]
+                i += 1
+            ref -= data[i]
+            i += 1
+            length += 2
+            if ref < 0 or o + length > size:
+                raise IndexError
+            distance = o - ref
+            if distance >= length:
+                out[o : o + length] = out[ref : ref + length]
+            else:  # overlapping: the last `distance` bytes repeat
+                pattern = bytes(out[ref:o])
+                out[o : o + length] = (pattern * (length // distance + 1))[:length]
+            o += length
+    except IndexError:
+        raise ValueError(f"{source}: corrupt PCD file: the compressed data are damaged.") from None
+    if o != size:
+        raise ValueError(
+            f"{source}: corrupt PCD file: the compressed data hold {o:,} of {size:,} bytes."
+        )
+    return bytes(out)
+
+
+_PCD_TYPES = {"F": "f", "U": "u", "I": "i"}
+
+
+def _parse_pcd(data, source):
+    """Points and colours of a PCD file (ascii, binary, binary_compressed), strictly."""
+    lines, offset = _header_lines(data, source, "DATA", "PCD")
+    header = {}
+    for line in lines:
+        words = line.split()
+        if not words or words[0].startswith("#"):
+            continue
+        header[words[0].upper()] = words[1:]
+    try:
+        names = header["FIELDS"]
+        sizes = [int(s) for s in header["SIZE"]]
+        types = header["TYPE"]
+        counts = [int(c) for c in header.get("COUNT", ["1"] * len(names))]
+        width = int(header["WIDTH"][0])
+        height = int(header.get("HEIGHT", ["1"])[0])
+        n_points = int(header.get("POINTS", [width * height])[0])
+        mode = header["DATA"][0].lower()
+        if not (len(names) == len(sizes) == len(types) == len(counts)) or min(counts) < 1:
+            raise ValueError("FIELDS, SIZE, TYPE and COUNT differ in length")
+        dtypes = [np.dtype("<" + _PCD_TYPES[t] + str(s)) for t, s in zip(types, sizes, strict=True)]
+        if n_points != width * height or n_points < 0:
+            raise ValueError(f"POINTS {n_points} is not WIDTH x HEIGHT = {width * height}")
+        if mode not in ("ascii", "binary", "binary_compressed"):
+            raise ValueError(f"unknown DATA {mode!r}")
+    except (KeyError, IndexError, ValueError, TypeError) as exc:
+        raise ValueError(f"{source}: malformed PCD header: {_one_line(exc)}.") from None
+    layout = list(zip(names, dtypes, counts, strict=True))
+    point_size = sum(dtype.itemsize * count for _, dtype, count in layout)
+    fields = {}
+    if mode == "ascii":
+        text = _decode_text(data[offset:], source)
+        _require_final_newline(text, source)
+        rows = [line for line in text.split("\n") if line.strip()]
+        if len(rows) != n_points:
+            if len(rows) < n_points:
+                raise ValueError(
+                    f"{source}: truncated PCD file: the header promised {n_points:,} points but "
+                    f"{len(rows):,} were read."
+                )
+            raise ValueError(
+                f"{source}: corrupt PCD file: {len(rows) - n_points:,} lines follow the "
+                f"{n_points:,} points the header promised."
+            )
+        if n_points:
+            table = _parse_rows(rows, 1, None, source)
+            column = 0
+            for name, dtype, count in layout:
+                values = table[:, column]
+                if dtype.kind in "iu" and np.any(values != np.round(values)):
+                    raise ValueError(f"{source}: corrupt PCD file: field {name!r} is not integer.")
+                fields[name] = values.astype(dtype)
+                column += count
+            if table.shape[1] != column:
+                raise ValueError(f"{source}: corrupt PCD file: rows of {table.shape[1]} values.")
+    else:
+        body = data[offset:]
+        if mode == "binary_compressed":
+            if len(body) < 8:
+                raise ValueError(
+                    f"{source}: truncated PCD file: the header promised {n_points:,} points but "
+                    "0 were read."
+                )
+            compressed, uncompressed = struct.unpack("<II", body[:8])
+            if uncompressed != n_points * point_size:
+                raise ValueError(
+                    f"{source}: corrupt PCD file: {uncompressed:,} uncompressed bytes for "
+                    f"{n_points:,} points of {point_size} bytes."
+                )
+            if len(body) - 8 < compressed:
+                raise ValueError(
+                    f"{source}: truncated PCD file: the header promised {n_points:,} points "
+                    f"({compressed:,} compressed bytes) but {len(body) - 8:,} bytes follow."
+                )
+            if len(body) - 8 > compressed:
+                raise ValueError(
+                    f"{source}: corrupt PCD file: {len(body) - 8 - compressed:,} bytes follow "
+                    "the compressed data."
+                )
+            raw = _lzf_decompress(body[8:], uncompressed, source) if uncompressed else b""
+            start = 0
+            for name, dtype, count in layout:  # one field after the other
+                size = n_points * count * dtype.itemsize
+                block = np.frombuffer(raw, dtype=dtype, count=n_points * count, offset=start)
+                fields[name] = block.reshape(n_points, count)[:, 0]
+                start += size
+        else:
+            expected = n_points * point_size
+            if len(body) != expected:
+                read = len(body) // point_size if point_size else 0
+                if len(body) < expected:
+                    raise ValueError(
+                        f"{source}: truncated PCD file: the header promised {n_points:,} points "
+                        f"but {read:,} were read."
+                    )
+                raise ValueError(
+                    f"{source}: corrupt PCD file: {len(body) - expected:,} bytes follow the "
+                    f"{n_points:,} points the header promised."
+                )
+            record = np.dtype([(name, dtype, (count,)) for name, dtype, count in layout])
+            block = np.frombuffer(body, dtype=record, count=n_points)
+            fields = {name: block[name][:, 0] for name, _, _ in layout}
+    points, _ = _points_and_colours(fields, source, "PCD points")
+    rgb = None
+    for name in ("rgb", "rgba"):
+        if name in fields:
+            packed = np.ascontiguousarray(fields[name])
+            if packed.dtype.itemsize != 4:
+                raise ValueError(f"{source}: PCD field {name!r} must be 4 bytes.")
+            packed = packed.view("<u4")
+            rgb = np.column_stack([(packed >> s) & 0xFF for s in (16, 8, 0)]) / 255.0
+            break
     return points, rgb
+
+
+def _read_cloud_file(path, *, colors=False):
+    """Points (and colours or None) of a ``.ply``, ``.pcd`` or ``.xyz`` file."""
+    suffix = Path(path).suffix.lower()
+    data = _read_bytes(path)
+    if suffix == ".xyz":
+        return _parse_text_table(data, path), None
+    points, rgb = (_parse_ply if suffix == ".ply" else _parse_pcd)(data, path)
+    if len(points) == 0:
+        raise ValueError(f"{path}: holds no points (its header declares 0).")
+    return points, (rgb if colors else None)
 
 
 def _read_points(path, name):
@@ -927,11 +1471,58 @@ def write_point_cloud(path, points, colors=None):
     if suffix == ".xyz":
         _write_text_table(path, points, None)
         return
-    import open3d as o3d
+    rgb = None if colors is None else np.round(colors * 255).astype(np.uint8)
+    data = _ply_bytes(points, rgb) if suffix == ".ply" else _pcd_bytes(points, rgb)
+    with atomic_write(path) as handle:
+        handle.write(data)
 
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    if colors is not None:
-        cloud.colors = o3d.utility.Vector3dVector(colors)
-    with _atomic_path(path, suffix=suffix) as tmp:
-        if not o3d.io.write_point_cloud(tmp, cloud, write_ascii=False):
-            raise ValueError(f"{path}: Open3D could not write the point cloud.")
+
+def _ply_bytes(points, rgb):
+    """A binary little-endian PLY file: float64 x, y, z and 8-bit red, green, blue."""
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    header = ["ply", "format binary_little_endian 1.0", "comment Created by mmreg"]
+    header.append(f"element vertex {len(points)}")
+    header += [f"property double {name}" for name in "xyz"]
+    if rgb is not None:
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+        header += [f"property uchar {name}" for name in ("red", "green", "blue")]
+    header.append("end_header")
+    record = np.empty(len(points), dtype=fields)
+    for column, name in enumerate("xyz"):
+        record[name] = points[:, column]
+    if rgb is not None:
+        for column, name in enumerate(("red", "green", "blue")):
+            record[name] = rgb[:, column]
+    return ("\n".join(header) + "\n").encode("ascii") + record.tobytes()
+
+
+def _pcd_bytes(points, rgb):
+    """A binary PCD v0.7 file: float32 x, y, z and packed 8-bit rgb (as Open3D writes)."""
+    names, sizes, types = ["x", "y", "z"], ["4"] * 3, ["F"] * 3
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if rgb is not None:
+        names.append("rgb")
+        sizes.append("4")
+        types.append("U")
+        fields.append(("rgb", "<u4"))
+    n = len(points)
+    header = [
+        "# .PCD v0.7 - Point Cloud Data file format",
+        "VERSION 0.7",
+        f"FIELDS {' '.join(names)}",
+        f"SIZE {' '.join(sizes)}",
+        f"TYPE {' '.join(types)}",
+        f"COUNT {' '.join(['1'] * len(names))}",
+        f"WIDTH {n}",
+        "HEIGHT 1",
+        "VIEWPOINT 0 0 0 1 0 0 0",
+        f"POINTS {n}",
+        "DATA binary",
+    ]
+    record = np.empty(n, dtype=fields)
+    for column, name in enumerate("xyz"):
+        record[name] = points[:, column]
+    if rgb is not None:
+        rgb = rgb.astype(np.uint32)
+        record["rgb"] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]
+    return ("\n".join(header) + "\n").encode("ascii") + record.tobytes()

@@ -53,13 +53,21 @@ def test_csv_has_header_and_str_path(tmp_path, X):
         "1 2 3 4 5 6\n7 8 9 10 11 12\n",
         "a_x\ta_y\ta_z\tb_x\tb_y\tb_z\n1\t2\t3\t4\t5\t6\n7\t8\t9\t10\t11\t12\n",
         "# comment\n\n1, 2, 3, 4, 5, 6\n7,  8,9,10,11,12\n",
-        "1  2\t3 4 5 6\n7 8 9 10 11 12",
+        "1  2\t3 4 5 6\r\n7 8 9 10 11 12\r\n",
+        "\ufeffax,ay,az,bx,by,bz\n1,2,3,4,5,6\n\n7,8,9,10,11,12\n  \n",
     ],
 )
 def test_text_delimiters_and_headers(tmp_path, text):
     path = tmp_path / "pairs.txt"
     path.write_text(text)
     np.testing.assert_array_equal(read_correspondences(path), np.arange(1.0, 13).reshape(2, 6))
+
+
+def test_text_without_a_final_line_break_may_be_cut_short(tmp_path):
+    path = tmp_path / "pairs.txt"
+    path.write_text("1 2 3 4 5 6\n7 8 9 10 11 12")
+    with pytest.raises(ValueError, match="pairs.txt: the last line does not end with a line break"):
+        read_correspondences(path)
 
 
 def test_single_row_text(tmp_path):
@@ -570,18 +578,36 @@ def test_atomic_write_bad_arguments(tmp_path):
         pass
 
 
-def test_open3d_failure_leaves_nothing(tmp_path, X, monkeypatch):
-    import open3d as o3d
-
-    def half_write(filename, *args, **kwargs):
-        with open(filename, "wb") as handle:
-            handle.write(b"ply\nformat binary")
-        return False
-
-    monkeypatch.setattr(o3d.io, "write_point_cloud", half_write)
-    with pytest.raises(ValueError, match="Open3D could not write"):
-        write_point_cloud(tmp_path / "cloud.ply", X[:, :3])
-    assert _listing(tmp_path) == []
+@pytest.mark.parametrize("ext", [".ply", ".pcd"])
+@pytest.mark.parametrize("with_colors", [False, True])
+def test_point_clouds_agree_with_open3d(tmp_path, X, ext, with_colors):
+    """Open3D reads what mmreg writes, and mmreg reads what Open3D writes (every encoding)."""
+    o3d = pytest.importorskip("open3d")
+    points = X[:, :3]
+    colors = np.random.default_rng(2).integers(0, 256, (len(X), 3)) / 255.0
+    write_point_cloud(tmp_path / f"ours{ext}", points, colors=colors if with_colors else None)
+    theirs = o3d.io.read_point_cloud(str(tmp_path / f"ours{ext}"))
+    atol = 1e-5 * np.abs(points).max() if ext == ".pcd" else 0.0
+    np.testing.assert_allclose(np.asarray(theirs.points), points, rtol=0, atol=atol)
+    if with_colors:
+        np.testing.assert_allclose(np.asarray(theirs.colors), colors, rtol=0, atol=1e-6)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    if with_colors:
+        cloud.colors = o3d.utility.Vector3dVector(colors)
+    encodings = [{"write_ascii": False}, {"write_ascii": True}]
+    if ext == ".pcd":
+        encodings.append({"compressed": True})
+    for options in encodings:
+        path = tmp_path / f"theirs{ext}"
+        assert o3d.io.write_point_cloud(str(path), cloud, **options)
+        read, rgb = read_point_cloud(path, colors=True)
+        # Open3D's text is rounded to a few digits.
+        tol = 1e-4 * np.abs(points).max() if options.get("write_ascii") or ext == ".pcd" else 0
+        np.testing.assert_allclose(read, points, rtol=0, atol=tol)
+        if with_colors:
+            np.testing.assert_allclose(rgb, colors, rtol=0, atol=1e-6)
+        else:
+            assert rgb is None
 
 
 @pytest.mark.parametrize(
@@ -610,3 +636,73 @@ def test_writers_fail_mid_way_without_residue(tmp_path, monkeypatch, write):
 def test_writers_into_missing_folder(tmp_path):
     with pytest.raises(FileNotFoundError, match="nope"):
         write_correspondences(tmp_path / "nope" / "x.npy", np.zeros((1, 6)))
+
+
+# --------------------------------------------------------------------------- damaged files
+@pytest.mark.parametrize("ext", [".ply", ".pcd"])
+def test_truncated_point_cloud_names_promised_and_read(tmp_path, X, ext):
+    """Open3D zero-filled the missing vertices; the count now fails the file."""
+    path = tmp_path / f"cut{ext}"
+    write_point_cloud(path, X[:, :3])
+    data = path.read_bytes()
+    record = 24 if ext == ".ply" else 12  # float64 or float32 x, y, z
+    path.write_bytes(data[: len(data) - 12 * record - 5])  # 12 whole records and a bit
+    what = "vertices" if ext == ".ply" else "points"
+    with pytest.raises(ValueError, match=f"cut\\{ext}: truncated .*promised 25 {what} but 12"):
+        read_point_cloud(path)
+    with pytest.raises(ValueError, match=f"cut\\{ext}: truncated"):
+        read_correspondences(tmp_path / f"cut{ext}", flow=tmp_path / f"cut{ext}")
+
+
+def test_truncated_ascii_ply(tmp_path, X):
+    path = tmp_path / "cut.ply"
+    rows = "".join(f"{x} {y} {z}\n" for x, y, z in X[:, :3])
+    header = "ply\nformat ascii 1.0\nelement vertex 25\nproperty float x\nproperty float y\n"
+    path.write_text(header + "property float z\nend_header\n" + rows)
+    assert read_point_cloud(path).shape == (25, 3)
+    path.write_text(header + "property float z\nend_header\n" + rows[: len(rows) // 2])
+    with pytest.raises(ValueError, match="cut.ply: "):
+        read_point_cloud(path)
+    cut = rows.splitlines(keepends=True)
+    path.write_text(header + "property float z\nend_header\n" + "".join(cut[:20]))
+    with pytest.raises(ValueError, match="cut.ply: truncated .*promised 25 vertices but 20"):
+        read_point_cloud(path)
+
+
+@pytest.mark.parametrize("ext", [".npy", ".npz", ".ply", ".pcd"])
+def test_bytes_after_the_end_are_an_error(tmp_path, X, ext):
+    path = tmp_path / f"long{ext}"
+    if ext in (".ply", ".pcd"):
+        write_point_cloud(path, X[:, :3])
+        read = read_point_cloud
+    else:
+        write_correspondences(path, X)
+        read = read_correspondences
+    path.write_bytes(path.read_bytes() + b"\x00" * 8)
+    with pytest.raises(ValueError, match=f"long\\{ext}: corrupt"):
+        read(path)
+
+
+def test_npz_checksum_detects_a_changed_byte(tmp_path, X):
+    path = tmp_path / "pairs.npz"
+    write_correspondences(path, X)
+    data = bytearray(path.read_bytes())
+    data[200] ^= 0x10  # inside the stored array
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="pairs.npz: cannot be read as a .npz file.*CRC"):
+        read_correspondences(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ("1,2,3,4,5,6\n# 7,8,9,10,11,12\n1,2,3,4,5,6\n", "line 2 holds '#' among the data"),
+        ("#1,2,3,4,5,6\n1,2,3,4,5,6\n", "line 1 is a comment holding only numbers"),
+        ("ax,2,az,bx,by,bz\n1,2,3,4,5,6\n", "line 1 holds 'ax', which is not a number"),
+    ],
+)
+def test_text_that_could_hide_a_damaged_row(tmp_path, text, problem):
+    path = tmp_path / "pairs.csv"
+    path.write_text(text)
+    with pytest.raises((ValueError, TypeError), match=f"pairs.csv: {problem}"):
+        read_correspondences(path)

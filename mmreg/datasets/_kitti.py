@@ -35,6 +35,7 @@ Pillow reads 16-bit grey PNGs exactly but reduces 16-bit colour PNGs to 8 bits, 
 flow maps are read with Open3D (a dependency already), which keeps all 16 bits.
 """
 
+import io
 import numbers
 import struct
 import zlib
@@ -53,18 +54,16 @@ _SPLITS = ("training", "testing")
 
 
 # --------------------------------------------------------------------------- file readers
-def _check_png_integrity(path, what):
-    """ValueError naming ``path`` unless every chunk's CRC holds and the pixel data are whole.
+def _check_png_integrity(data, path, what):
+    """ValueError naming ``path`` unless the PNG bytes ``data`` are whole and undamaged.
 
-    Walks the chunks up to ``IEND``, checks each CRC, inflates the ``IDAT`` stream and,
-    for a non-interlaced image, checks it holds ``height * (1 + width * bytes per pixel)``
-    bytes (one filter byte per row).
+    Walks the chunks from ``IHDR`` to ``IEND`` checking every CRC-32, requires that
+    nothing follows ``IEND``, inflates the ``IDAT`` stream (whose Adler-32 zlib checks)
+    and requires that it ends exactly, holding ``height * (1 + row bytes)`` bytes (one
+    filter byte per row) for a non-interlaced image. PNG checksums every byte, so a
+    truncated file, bytes appended and any changed byte are all detected.
     """
-    data = Path(path).read_bytes()
-    width, height = struct.unpack(">II", data[16:24])
-    bit_depth, color_type, interlace = data[24], data[25], data[28]
-    channels = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}.get(color_type)
-    pos, idat, ended = len(_PNG_SIGNATURE), [], False
+    pos, idat, header, ended = len(_PNG_SIGNATURE), [], None, False
     while pos + 12 <= len(data):
         (length,) = struct.unpack(">I", data[pos : pos + 4])
         tag = data[pos + 4 : pos + 8]
@@ -74,24 +73,37 @@ def _check_png_integrity(path, what):
             break
         if struct.unpack(">I", crc)[0] != zlib.crc32(tag + body) & 0xFFFFFFFF:
             raise ValueError(f"{path}: corrupt PNG ({what}): bad CRC in chunk {tag!r}.")
-        if tag == b"IDAT":
+        if header is None:
+            if tag != b"IHDR" or length != 13:
+                raise ValueError(f"{path}: corrupt PNG ({what}): no IHDR chunk first.")
+            header = struct.unpack(">IIBBBBB", body)
+        elif tag == b"IDAT":
             idat.append(body)
         pos += 12 + length
         if tag == b"IEND":
             ended = True
             break
-    if not ended or channels is None:
+    if not ended or header is None:
         raise ValueError(f"{path}: corrupt PNG ({what}): truncated (no IEND chunk).")
+    if pos != len(data):
+        raise ValueError(
+            f"{path}: corrupt PNG ({what}): {len(data) - pos:,} bytes follow the IEND chunk."
+        )
+    width, height, bit_depth, color_type, _, _, interlace = header
+    channels = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}.get(color_type)
+    if channels is None or bit_depth not in (1, 2, 4, 8, 16) or width < 1 or height < 1:
+        raise ValueError(f"{path}: corrupt PNG ({what}): invalid IHDR chunk.")
     try:
         inflater = zlib.decompressobj()
         pixels = inflater.decompress(b"".join(idat)) + inflater.flush()
     except zlib.error as exc:
         raise ValueError(f"{path}: corrupt PNG ({what}): {exc}") from exc
-    expected = height * (1 + width * channels * bit_depth // 8)
-    if not inflater.eof or (interlace == 0 and len(pixels) != expected):
+    row_bytes = (width * channels * bit_depth + 7) // 8
+    expected = height * (1 + row_bytes)
+    if not inflater.eof or inflater.unused_data or (interlace == 0 and len(pixels) != expected):
         raise ValueError(
-            f"{path}: corrupt PNG ({what}): the pixel data are incomplete ({len(pixels)} "
-            f"of {expected} bytes)."
+            f"{path}: corrupt PNG ({what}): the pixel data are incomplete or too long "
+            f"({len(pixels)} of {expected} bytes)."
         )
 
 
@@ -120,16 +132,20 @@ def read_png(path, what="image"):
         If it is not a PNG file or is corrupt.
     """
     path = _check_readable(path, what)
-    with open(path, "rb") as handle:
-        head = handle.read(26)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot be read ({what}): {exc}") from exc
+    head = data[:26]
     if len(head) < 26 or not head.startswith(_PNG_SIGNATURE) or head[12:16] != b"IHDR":
         raise ValueError(f"{path}: is not a PNG file ({what}).")
+    # Decoders fill a damaged file with zeros (Open3D, with only a printed warning) or
+    # ignore what follows the image: check every checksum first.
+    _check_png_integrity(data, path, what)
     bit_depth, color_type = head[24], head[25]
     if bit_depth == 16 and color_type in (2, 6):  # 16-bit RGB / RGBA
         import open3d as o3d
 
-        # Open3D decodes a damaged file into zeros with only a printed warning: check first.
-        _check_png_integrity(path, what)
         image = np.asarray(o3d.io.read_image(str(path)))
         if image.size == 0 or image.dtype != np.uint16:
             raise ValueError(f"{path}: corrupt 16-bit colour PNG ({what}).")
@@ -137,7 +153,7 @@ def read_png(path, what="image"):
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(path) as image:
+        with Image.open(io.BytesIO(data)) as image:
             image.load()
             array = np.array(image)
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError, zlib.error) as exc:
