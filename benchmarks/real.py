@@ -522,7 +522,7 @@ def provenance():
     return info
 
 
-def write_markdown(path, title, summary, notes, seeds, argv):
+def write_markdown(path, title, table, summary, notes, seeds, argv):
     info = provenance()
     lines = [
         f"# {title}",
@@ -538,9 +538,14 @@ def write_markdown(path, title, summary, notes, seeds, argv):
     ]
     lines += [f"- note: {n}" for n in notes]
     lines += [
+        "- static cluster and moving flags from: "
+        + ", ".join(sorted(set(table["moving_from"])))
+        + " (fallback: the largest cluster is static, a cluster moves when its motion carries "
+        "its points > 3 cm from the static motion's)",
         "- Outliers3D (HPLFlowNet) divides the error by |true flow| + 1e-4 m, so where the "
-        "static world has zero flow (ego-compensated `icpflow_av2_demo`) any error above "
-        "about 1e-5 m makes a point an outlier; EPE and Acc3DS (CSV) are the telling ones there",
+        "static world barely moves (ego-compensated `icpflow_av2_demo`, the stopped ego "
+        "vehicle of `av2_api_adcf7d18`) a few millimetres make a point an outlier; EPE and "
+        "Acc3DS/Acc3DR (CSV) are the telling ones there",
     ]
     lines += ["", summary.to_markdown(index=False, floatfmt=".3g"), ""]
     Path(path).write_text("\n".join(lines))
@@ -602,7 +607,7 @@ def main(argv=None):
     print(summary.to_markdown(index=False, floatfmt=".3g"))
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / f"{stem}.csv", index=False)
-    write_markdown(args.out / f"{stem}.md", title, summary, notes, args.seeds, argv)
+    write_markdown(args.out / f"{stem}.md", title, table, summary, notes, args.seeds, argv)
     return 0
 
 
