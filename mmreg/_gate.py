@@ -43,11 +43,18 @@ class ClusterGate:
         Centroid of each cluster's points, if already known.
     spread : ndarray of shape (n,), default=None
         Distance of each clustered point to its cluster's centroid, if already known.
+    ungated : array-like of int, default=()
+        Clusters admitted everywhere, however far (the static world, which is one
+        object however far apart its visible pieces lie).
     """
 
-    def __init__(self, points, labels, n_clusters, radius, *, centers=None, spread=None):
+    def __init__(
+        self, points, labels, n_clusters, radius, *, centers=None, spread=None, ungated=()
+    ):
         self.radius = radius
         self.n_clusters = n_clusters
+        self._ungated = np.zeros(n_clusters, dtype=bool)
+        self._ungated[np.asarray(ungated, dtype=np.intp)] = True
         if radius is None:
             return
         points = np.asarray(points, dtype=float)
@@ -102,7 +109,7 @@ class ClusterGate:
         # A relative slack keeps rounding from closing an open gate; the exact test
         # decides every pair that survives.
         slack = 1e-9 * (1.0 + reach**2)
-        return (reach >= 0) & (sq < reach**2 + slack)
+        return ((reach >= 0) & (sq < reach**2 + slack)) | self._ungated
 
     def _ball_open(self, query, clusters):
         """False where the bounding ball proves the gate of ``clusters`` closed."""
@@ -110,7 +117,7 @@ class ClusterGate:
         sq = np.sum(diff * diff, axis=-1)
         reach = self._ball_radius[clusters] + self.radius
         slack = 1e-9 * (1.0 + reach**2)
-        return (reach >= 0) & (sq < reach**2 + slack)
+        return ((reach >= 0) & (sq < reach**2 + slack)) | self._ungated[clusters]
 
     def admits(self, query, clusters):
         """Exact gate of each query point against the cluster given for it; boolean (m,).
@@ -123,8 +130,8 @@ class ClusterGate:
         """
         if self.radius is None:
             return np.ones(len(query), dtype=bool)
-        result = np.zeros(len(query), dtype=bool)
-        open_ = np.flatnonzero(self._ball_open(query, clusters))
+        result = self._ungated[clusters]
+        open_ = np.flatnonzero(~result & self._ball_open(query, clusters))
         if len(open_) == 0:
             return result
         if self._representatives is None:
@@ -164,7 +171,7 @@ class ClusterGate:
 
     def within(self, query, cluster):
         """Exact gate of ``query`` points (m, d) against one cluster; boolean (m,)."""
-        if self.radius is None:
+        if self.radius is None or self._ungated[cluster]:
             return np.ones(len(query), dtype=bool)
         members = self._cluster_points(cluster)
         if len(members) == 0:

@@ -91,6 +91,24 @@ def test_gate_separates_far_objects_with_same_motion():
     assert np.all(vanilla.labels_[scene.labels == 1] == merged[0])
 
 
+def test_sweep_variant_takes_a_majority_motion_for_one_static_world():
+    # The two objects with one motion hold two thirds of the scene: variant="sweep"
+    # reads that majority as the static world, one cluster however far apart;
+    # static_share=None keeps them apart as the gate of eq. (7) does.
+    scene = make_scene(n_objects=3, n_points=600, noise=0.005, same_motion=1, random_state=3)
+    init = split_init(scene.labels, pieces=2)
+    est = MultiModelRegistration(init=init, tau=1.5, min_cluster_size=20, variant="sweep")
+    est.fit(scene.X)
+    alike = np.isin(scene.labels, [0, 1])
+    assert est.n_clusters_ == 2
+    assert np.all(est.labels_[alike] == est.static_cluster_)
+    assert not est.moving_[est.static_cluster_]
+    assert est.moving_[est.labels_[scene.labels == 2][0]]
+    apart = est.set_params(static_share=None).fit(scene.X)
+    assert_objects_recovered(scene, apart)
+    assert apart.static_cluster_ == -1
+
+
 def test_outliers_far_from_objects_are_labelled_minus_one():
     scene = make_scene(n_objects=3, n_points=900, outlier_fraction=0.1, random_state=4)
     est = MultiModelRegistration(init=split_init(scene.labels, pieces=3)).fit(scene.X)

@@ -92,10 +92,17 @@ class MultiModelRegistration(BaseRegistration):
         An mmreg initialiser is fitted on ``X``; any other object with ``fit_predict``
         (every scikit-learn clusterer) is fitted on the a-points ``X[:, :d]``. An array
         gives precomputed labels (e.g. from SAM masks), negative for none.
-    variant : {"robust", "paper"}, default="robust"
+    variant : {"robust", "sweep", "paper"}, default="robust"
         ``"paper"``: Algorithm 1 exactly as published (bit for bit the results of
         :func:`~mmreg.estimators.multi_model_em`). ``"robust"``: with the outlier model,
-        merging and re-proposal described above (see Notes).
+        merging and re-proposal described above (see Notes). ``"sweep"``: the robust
+        variant for real LiDAR sweeps and scene-flow networks: every cluster keeps a
+        robust noise scale of its own (a network errs by millimetres on the static world
+        and by centimetres on a moving car), the dominant motion is one static world
+        however far apart its pieces lie (``static_share``, ``min_motion``), touching
+        moving pieces whose motions agree within ``motion_tolerance`` of their motion are
+        one object, proposals search the noise scale (as MAGSAC marginalises it) and try
+        local translations, and slow movers are sought in the static world's tail.
     confidence : float in (0, 1), default=0.999
         Robust variant: the quantile of the ``sigma^2 chi2_d`` residual distribution
         within which a correspondence counts as an inlier of its cluster when the
@@ -109,9 +116,34 @@ class MultiModelRegistration(BaseRegistration):
         a-points' frame (stereo depth errs by the square of the range); ``c >= 0`` is
         estimated by maximum likelihood every iteration and is 0 when the noise does not
         grow with range. ``"constant"``: ``sigma_j`` for every member.
+    static_share : float in (0, 1] or None, default=0.5
+        ``variant="sweep"``: the dominant motion is the *static world* (the ego motion of a
+        sensor on a vehicle) when the clusters that share it hold at least this share of
+        the clustered correspondences. Its pieces then form one cluster however far apart
+        they lie (ground removed, a LiDAR sweep is islands of buildings, poles and parked
+        cars), the gate of eq. (7) admits it everywhere, and ``static_cluster_`` names it.
+        Other motions keep the gate: two far-apart objects that move alike stay two
+        objects. None: no static world.
+    min_motion : float, default=0.05
+        ``variant="sweep"``: a cluster whose motion carries its points less than this far (RMS,
+        in the units of the points) from where the static world's motion carries them is
+        part of the static world, and a cluster is ``moving_`` only beyond it. The default
+        is Argoverse 2's rule for dynamic points (0.5 m/s between sweeps 0.1 s apart),
+        which also absorbs the annotation jitter of parked cars.
+    motion_tolerance : float, default=0.2
+        ``variant="sweep"``: two touching moving clusters are one object when each one's
+        motion carries the other's points within this fraction of their motion relative
+        to the static world (RMS). A scene-flow network's error on a moving object grows
+        with its motion and bends the flow across it (ZeroFlow: 10-30 cm over a car 1.1 m
+        into its motion), so the object's parts fit different rigid motions. Objects
+        that do not touch are never joined this way. 0 turns this off.
     tol : float in [0, 1), default=1e-3
         Robust variant: the iterations have converged when one merges and proposes
         nothing and changes the label of at most this fraction of the correspondences.
+    skip_steps : tuple of str, default=()
+        Robust variant: steps of the loop to leave out, for ablations; any of
+        ``"trimming"``, ``"range_noise"``, ``"merging"``, ``"static_world"``,
+        ``"moving_pieces"``, ``"boundary_layers"``, ``"outliers"``, ``"proposals"`` (see Notes).
     sigma_floor : float or None, default=None
         Smallest noise scale ``sigma_j``. None uses ``1e-6`` times the RMS spread of the
         b-points, which keeps noiseless data well posed (see Notes).
@@ -157,6 +189,12 @@ class MultiModelRegistration(BaseRegistration):
     log_outlier_density_ : float
         Robust variant: ``log(pi_0 / V)``, the fitted outlier component, which
         :meth:`predict` compares each correspondence's likelihood with.
+    static_cluster_ : int
+        Robust variants: the cluster of the static world, -1 if no motion holds
+        ``static_share`` of the scene.
+    moving_ : ndarray of shape (n_clusters_,)
+        Robust variants: whether each cluster moves, relative to the static world, by at
+        least ``min_motion``; all True when there is no static world.
     noise_growth_ : float
         Robust variant: ``c`` of the noise scale ``sigma_j (1 + c ||a||^2)``; ``sigmas_``
         are then the scales at the origin.
@@ -278,10 +316,14 @@ class MultiModelRegistration(BaseRegistration):
         "min_cluster_size": [Interval(Integral, 1, None, closed="left")],
         "max_iter": [Interval(Integral, 0, None, closed="left")],
         "init": INIT_CONSTRAINT,
-        "variant": [StrOptions({"robust", "paper"})],
+        "variant": [StrOptions({"robust", "sweep", "paper"})],
         "confidence": [Interval(Real, 0, 1, closed="neither")],
         "n_hypotheses": [Interval(Integral, 0, None, closed="left")],
         "noise_model": [StrOptions({"range", "constant"})],
+        "static_share": [Interval(Real, 0, 1, closed="right"), None],
+        "min_motion": [Interval(Real, 0, None, closed="left")],
+        "motion_tolerance": [Interval(Real, 0, None, closed="left")],
+        "skip_steps": [tuple, list],
         "tol": [Interval(Real, 0, 1, closed="left")],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
@@ -298,7 +340,11 @@ class MultiModelRegistration(BaseRegistration):
         confidence=0.999,
         n_hypotheses=32,
         noise_model="range",
+        static_share=0.5,
+        min_motion=0.05,
+        motion_tolerance=0.2,
         tol=1e-3,
+        skip_steps=(),
         sigma_floor=None,
         random_state=None,
         verbose=0,
@@ -311,7 +357,11 @@ class MultiModelRegistration(BaseRegistration):
         self.confidence = confidence
         self.n_hypotheses = n_hypotheses
         self.noise_model = noise_model
+        self.static_share = static_share
+        self.min_motion = min_motion
+        self.motion_tolerance = motion_tolerance
         self.tol = tol
+        self.skip_steps = skip_steps
         self.sigma_floor = sigma_floor
         self.random_state = random_state
         self.verbose = verbose
@@ -358,13 +408,20 @@ class MultiModelRegistration(BaseRegistration):
                 confidence=self.confidence,
                 n_hypotheses=self.n_hypotheses,
                 noise_model=self.noise_model,
+                static_share=self.static_share,
+                min_motion=self.min_motion,
+                motion_tolerance=self.motion_tolerance,
                 tol=self.tol,
+                skip_steps=tuple(self.skip_steps),
+                sweep=self.variant == "sweep",
                 random_state=self.random_state,
                 verbose=self.verbose,
             )
             self.history_ = result.history
             self.log_outlier_density_ = result.log_outlier_density
             self.noise_growth_ = result.noise_growth
+            self.static_cluster_ = result.static_cluster
+            self.moving_ = result.moving
         self._store_clusters(
             a, result.labels, result.rotations, result.translations, result.sigmas, result.weights
         )

@@ -4,23 +4,31 @@ The loop is the paper's (fit every cluster, drop the small ones, reassign each
 correspondence to its most likely cluster within the gate); the named steps of
 :mod:`mmreg.estimators._robust_steps` sit between its lines:
 
-1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member;
+1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member, each
+   cluster with a robust noise scale of its own;
 2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`);
-3. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`);
-4. removal of small clusters (Algorithm 1, lines 10-13);
-5. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
+3. the static world (:func:`merge_static_world`): the dominant motion gathers every
+   piece that moves with it, however far apart, into one cluster that the gate of eq. (7)
+   admits everywhere;
+4. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`);
+5. removal of small clusters (Algorithm 1, lines 10-13);
+6. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
    correspondence's noise scale ``sigma_j g_i`` growing with its range when the data say
    so (:func:`estimate_range_growth`);
-6. the outlier component (:func:`reject_outliers`);
-7. new clusters from what no cluster explains (:func:`propose_clusters`): this is also
+7. the outlier component (:func:`reject_outliers`);
+8. new clusters from what no cluster explains (:func:`propose_clusters`): this is also
    how a cluster holding two motions splits, since the trimmed M-step fits the majority
    and leaves the other motion's correspondences unexplained.
+
+Each step but the E-step can be turned off (``skip_steps``, for ablations); with all of
+them off the loop is Algorithm 1 with the static world's gate still in place.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.stats import chi2
 from sklearn.utils import check_random_state
 
 from mmreg._gate import ClusterGate
@@ -32,8 +40,11 @@ from mmreg.estimators._robust_steps import (
     boundary_layers,
     drop_small_clusters,
     estimate_range_growth,
+    join_moving_pieces,
     log_uniform_density,
     merge_adjacent,
+    merge_static_world,
+    motion_gap,
     propose_clusters,
     range_noise_scale,
     reject_outliers,
@@ -41,7 +52,23 @@ from mmreg.estimators._robust_steps import (
     trimmed_fit,
 )
 
-__all__ = ["RobustEMResult", "robust_multi_model_em"]
+__all__ = ["ROBUST_STEPS", "RobustEMResult", "robust_multi_model_em"]
+
+#: The steps around Algorithm 1 that ``skip_steps`` may turn off.
+ROBUST_STEPS = (
+    "trimming",
+    "range_noise",
+    "merging",
+    "static_world",
+    "moving_pieces",
+    "boundary_layers",
+    "outliers",
+    "proposals",
+)
+# The outlier component's weight is the last iteration's outlier share, capped: when
+# most correspondences are unexplained (initial clusters that mix several motions), an
+# outlier prior above one half would make itself true.
+_MAX_OUTLIER_WEIGHT = 0.5
 
 
 @dataclass
@@ -53,13 +80,19 @@ class RobustEMResult(EMResult):
     """``log(pi_0 / V)``: the outlier component's log-density at the end."""
     noise_growth: float = 0.0
     """``c`` of the noise scale ``sigma_j (1 + c ||a||^2)``; 0 for equal noise."""
+    static_cluster: int = -1
+    """The static world's cluster, -1 if no motion holds the majority."""
+    moving: np.ndarray = None
+    """Per cluster: does it move relative to the static world?"""
 
 
-def _range_noise(a, b, labels, models, sigma_floor):
+def _range_noise(a, b, labels, models, sigma_floor, per_cluster):
     """The growth of the noise with range, and each correspondence's noise scale."""
     clustered = np.where(labels < len(models.sigmas), labels, -1)
     squared = squared_residuals(a, b, clustered, models.rotations, models.translations)
-    growth = estimate_range_growth(a, squared, clustered, len(models.sigmas), sigma_floor)
+    growth = estimate_range_growth(
+        a, squared, clustered, len(models.sigmas), sigma_floor, per_cluster=per_cluster
+    )
     return growth, (range_noise_scale(a, growth) if growth > 0 else None)
 
 
@@ -74,7 +107,7 @@ def _sampling_spacing(points, k=6):
     n = len(points)
     if n < 2:
         return np.zeros(n)
-    distance, index = cKDTree(points).query(points, k=min(k, n), workers=-1)
+    distance, index = cKDTree(points).query(points, k=min(k, n))
     return np.median(distance[:, 1][index], axis=1)
 
 
@@ -94,11 +127,16 @@ def robust_multi_model_em(
     confidence=0.999,
     n_hypotheses=32,
     noise_model="range",
+    static_share=0.5,
+    min_motion=0.05,
+    motion_tolerance=0.2,
     tol=1e-3,
+    skip_steps=(),
+    sweep=False,
     random_state=None,
     verbose=0,
 ):
-    """Classification-EM with outliers, merging and re-proposal (the robust default).
+    """Classification-EM with outliers, merging, a static world and re-proposal.
 
     Parameters
     ----------
@@ -118,9 +156,26 @@ def robust_multi_model_em(
         ``"range"``: correspondence ``i`` of cluster ``j`` has noise ``sigma_j (1 + c
         ||a_i||^2)``, with ``c >= 0`` estimated by maximum likelihood every iteration (0
         when the noise does not grow with range); ``"constant"``: ``sigma_j``.
+    static_share : float or None, default=0.5
+        The dominant motion is the static world when it holds at least this share of the
+        clustered correspondences (:func:`merge_static_world`); None: no static world.
+    min_motion : float, default=0.05
+        A cluster moving less than this (RMS, in the units of the points) relative to the
+        static world is part of it.
+    motion_tolerance : float, default=0.2
+        Touching moving clusters whose motions agree within this fraction of their motion
+        are one object (:func:`join_moving_pieces`).
     tol : float, default=1e-3
         Converged when an iteration merges and proposes nothing and changes the label of
         at most this fraction of the correspondences (0: of none, as Algorithm 1).
+    skip_steps : tuple of str, default=()
+        Steps of :data:`ROBUST_STEPS` to leave out (ablations).
+    sweep : bool, default=False
+        The variant for real sweeps and scene-flow networks: a noise scale per cluster
+        (robust, floored at the scene's), the static world, joined moving pieces,
+        proposals that search the noise scale and also try local translations, slow
+        movers sought in the static world's tail, and the outlier weight capped at one
+        half. False: one shared noise scale and none of these (the robust default).
     random_state : int, RandomState instance or None, default=None
         Seeds the proposals' samples.
     verbose : int, default=0
@@ -130,21 +185,44 @@ def robust_multi_model_em(
     -------
     RobustEMResult
     """
+    unknown = set(skip_steps) - set(ROBUST_STEPS)
+    if unknown:
+        raise ValueError(f"Unknown steps {sorted(unknown)}; the steps are {ROBUST_STEPS}.")
+    run = {step: step not in skip_steps for step in ROBUST_STEPS}
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     n, d = a.shape
     rng = check_random_state(random_state)
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
+    confidence_trim = confidence if run["trimming"] else 1.0
+    share = static_share if sweep and run["static_world"] else None
+    join_pieces = sweep and run["moving_pieces"] and motion_tolerance > 0
+    max_outlier_weight = _MAX_OUTLIER_WEIGHT if sweep else 1.0
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
-    spacing = _sampling_spacing(a)
+    spacing = _sampling_spacing(a) if run["boundary_layers"] else None
     history = []
     converged = False
     n_iter = 0
     outlier_share = None
     noise_scale = None
+    growth = 0.0
+    static = -1
+
+    def fit(labels, n_clusters):
+        return trimmed_fit(
+            a,
+            b,
+            labels,
+            n_clusters,
+            sigma_floor,
+            noise_scale,
+            confidence=confidence_trim,
+            per_cluster=sweep,
+        )
+
     with single_threaded_blas():
         for _ in range(max_iter):
             if n_clusters == 0:
@@ -154,31 +232,43 @@ def robust_multi_model_em(
             n_iter += 1
             # 1. M-step on inliers. The noise's growth with range comes from the last
             # iteration's clusters; the first estimates it from the initial ones.
-            inliers, models = trimmed_fit(
-                a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
-            )
-            if noise_model == "range" and n_iter == 1:
-                growth, noise_scale = _range_noise(a, b, inliers, models, sigma_floor)
+            inliers, models = fit(labels, n_clusters)
+            if run["range_noise"] and noise_model == "range" and n_iter == 1:
+                growth, noise_scale = _range_noise(a, b, inliers, models, sigma_floor, sweep)
                 if noise_scale is not None:
-                    inliers, models = trimmed_fit(
-                        a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
-                    )
+                    inliers, models = fit(labels, n_clusters)
             if outlier_share is None:
                 outlier_share = np.mean(inliers < 0)
             # 2. Merge adjacent clusters that share a motion.
-            pairs = adjacent_pairs(a, inliers, n_clusters, tau)
-            root, models, n_merges = merge_adjacent(models, pairs, d, sigma_floor)
+            root, n_merges = np.arange(n_clusters), 0
+            if run["merging"]:
+                pairs = adjacent_pairs(a, inliers, n_clusters, tau)
+                root, models, n_merges = merge_adjacent(models, pairs, d, sigma_floor)
+            # 3. The static world: every piece that moves with it, however far.
+            static, models, root, n_static, _ = _gather_static_world(
+                models, root, d, sigma_floor, share, min_motion
+            )
             members = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
-            # 3. Dissolve layers of flow that bled along another cluster's boundary.
-            bled = boundary_layers(a, members, n_clusters, spacing)
-            members[np.isin(members, bled)] = -1
-            # 4. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
+            # 4. Pieces of one moving object whose flow bends with the motion.
+            n_joined = 0
+            if join_pieces:
+                joined, models, n_joined = join_moving_pieces(
+                    a, members, models, static, d, sigma_floor, tolerance=motion_tolerance
+                )
+                members = np.where(members >= 0, joined[np.maximum(members, 0)], -1)
+            # 5. Dissolve layers of flow that bled along another cluster's boundary.
+            bled = []
+            if run["boundary_layers"]:
+                bled = boundary_layers(a, members, n_clusters, spacing, exempt=static)
+                members[np.isin(members, bled)] = -1
+            # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
             counts = np.bincount(members[members >= 0], minlength=n_clusters)
             own, kept = drop_small_clusters(members, counts, min_cluster_size)
+            static = _position(kept, static)
             models = models.take(kept)
             weights = _weights(counts[kept], n)
-            # 5. E-step and classification of eq. (7), gated by tau.
-            gate = ClusterGate(a, own, len(kept), tau)
+            # 7. E-step and classification of eq. (7), gated by tau but for the static world.
+            gate = ClusterGate(a, own, len(kept), tau, ungated=[static] if static >= 0 else [])
             new = assign_correspondences(
                 a,
                 b,
@@ -191,91 +281,116 @@ def robust_multi_model_em(
                 order,
                 noise_scale,
             )
-            # 6. The outlier component.
-            log_outlier = np.log(max(outlier_share, 1.0 / n)) + log_volume_density
-            new = reject_outliers(
-                a,
-                b,
-                new,
-                models.rotations,
-                models.translations,
-                models.sigmas,
-                weights,
-                log_outlier,
-                noise_scale,
-            )
+            # 8. The outlier component.
+            outlier_weight = min(max(outlier_share, 1.0 / n), max_outlier_weight)
+            log_outlier = np.log(outlier_weight) + log_volume_density
+            if run["outliers"]:
+                new = reject_outliers(
+                    a,
+                    b,
+                    new,
+                    models.rotations,
+                    models.translations,
+                    models.sigmas,
+                    weights,
+                    log_outlier,
+                    noise_scale,
+                )
             outlier_share = np.mean(new < 0)
-            # 7. New clusters from the unexplained correspondences.
-            scale = float(models.sigmas[0]) if len(kept) else sigma_floor
-            found = propose_clusters(
-                a,
-                b,
-                new < 0,
-                tau if tau is not None else np.inf,
-                scale,
-                log_outlier,
-                n,
-                rng,
-                log_volume_density=log_volume_density,
-                models=models,
-                min_cluster_size=min_cluster_size,
-                sigma_floor=sigma_floor,
-                noise_scale=noise_scale,
-                n_hypotheses=n_hypotheses,
-                confidence=confidence,
-            )
-            for members in found:
-                new[members] = len(kept)
+            # 9. New clusters from the unexplained correspondences.
+            found = []
+            if run["proposals"]:
+                found = propose_clusters(
+                    a,
+                    b,
+                    _unexplained(a, b, new, static, models, noise_scale, confidence),
+                    tau if tau is not None else np.inf,
+                    float(np.min(models.sigmas)) if len(kept) else sigma_floor,
+                    log_outlier,
+                    n,
+                    rng,
+                    log_volume_density=log_volume_density,
+                    models=models,
+                    min_cluster_size=min_cluster_size,
+                    sigma_floor=sigma_floor,
+                    noise_scale=noise_scale,
+                    n_hypotheses=n_hypotheses,
+                    confidence=confidence,
+                    reference=(
+                        (models.rotations[static], models.translations[static])
+                        if static >= 0
+                        else None
+                    ),
+                    per_cluster=sweep,
+                )
+            for group in found:
+                new[group] = len(kept)
                 kept = np.append(kept, -1)
-            # A proposal along another cluster's boundary is bled flow too.
-            layers = boundary_layers(a, new, len(kept), spacing)
-            found = [f for k, f in enumerate(found) if len(models.sigmas) + k not in layers]
-            new[np.isin(new, layers[layers >= len(models.sigmas)])] = -1
+            if run["boundary_layers"] and found:
+                # A proposal along another cluster's boundary is bled flow too.
+                layers = boundary_layers(a, new, len(kept), spacing, exempt=static)
+                first_new = len(models.sigmas)
+                found = [f for k, f in enumerate(found) if first_new + k not in layers]
+                new[np.isin(new, layers[layers >= first_new])] = -1
             step = {
                 "iteration": n_iter,
                 "clusters": int(len(kept)),
                 "merges": int(n_merges),
+                "static_pieces": int(n_static),
+                "joined": int(n_joined),
                 "bled": len(bled),
                 "dropped": int(np.count_nonzero((counts > 0) & (counts < min_cluster_size))),
                 "outliers": int(np.count_nonzero(new < 0)),
                 "proposed": len(found),
-                "noise_growth": 0.0 if noise_scale is None else float(growth),
+                "noise_growth": float(growth) if noise_scale is not None else 0.0,
             }
             history.append(step)
-            if noise_model == "range" and len(models.sigmas):
-                growth, noise_scale = _range_noise(a, b, new, models, sigma_floor)
+            if run["range_noise"] and noise_model == "range" and len(models.sigmas):
+                growth, noise_scale = _range_noise(a, b, new, models, sigma_floor, sweep)
             new, n_clusters = _compact_initial(new)
             n_changed = int(np.count_nonzero(new != labels)) if len(new) == len(labels) else n
             step["changed"] = n_changed
             if verbose:
                 print(", ".join(f"{key} {value:g}" for key, value in step.items()))
             labels = new
-            if n_changed <= tol * n and not n_merges and not found:
+            if n_changed <= tol * n and not (n_merges or n_static or n_joined or found):
                 converged = True
                 break
-    # Final clean-up: no boundary layer and no cluster below m_min; numbered by size.
-    # With max_iter=0 the initial clusters are returned as given (the paper's contract).
+    # Final clean-up: one more merge, the static world gathered, no boundary layer and
+    # no cluster below m_min; numbered by size. With max_iter=0 the initial clusters are
+    # returned as given (the paper's contract).
     if n_iter and n_clusters:
-        # The last E-step can leave a few correspondences of a shrunk cluster behind, in a
-        # cluster of their own with their neighbour's motion: one more merge pass.
-        inliers, models = trimmed_fit(
-            a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
+        inliers, models = fit(labels, n_clusters)
+        root = np.arange(n_clusters)
+        if run["merging"]:
+            pairs = adjacent_pairs(a, inliers, n_clusters, tau)
+            root, models, _ = merge_adjacent(models, pairs, d, sigma_floor)
+        static, models, root, _, slow = _gather_static_world(
+            models, root, d, sigma_floor, share, min_motion
         )
-        pairs = adjacent_pairs(a, inliers, n_clusters, tau)
-        root, _, _ = merge_adjacent(models, pairs, d, sigma_floor)
-        labels, n_clusters = _compact_initial(
-            np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
-        )
-        bled = boundary_layers(a, labels, n_clusters, spacing)
-        labels = np.where(np.isin(labels, bled), -1, labels)
+        # Slow clusters are reported as the static world they belong to.
+        root[np.isin(root, slow)] = static
+        labels = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
+        if join_pieces:
+            joined, models, _ = join_moving_pieces(
+                a, labels, models, static, d, sigma_floor, tolerance=motion_tolerance
+            )
+            labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
+        if run["boundary_layers"]:
+            bled = boundary_layers(a, labels, n_clusters, spacing, exempt=static)
+            labels = np.where(np.isin(labels, bled), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
     labels, kept = drop_small_clusters(labels, counts, min_cluster_size)
+    static = _position(kept, static) if n_iter else -1
     n_clusters = len(kept)
     rank = _size_rank(labels, n_clusters)
     labels = rank[labels]
-    _, models = trimmed_fit(
-        a, b, labels, n_clusters, sigma_floor, noise_scale, confidence=confidence
-    )
+    static = int(rank[static]) if static >= 0 else -1
+    _, models = fit(labels, n_clusters)
+    moving = np.ones(n_clusters, dtype=bool)
+    if static >= 0:
+        moving = motion_gap(models, static, np.arange(n_clusters)) >= min_motion
+        moving[static] = False
     weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), n)
     return RobustEMResult(
         labels,
@@ -287,5 +402,66 @@ def robust_multi_model_em(
         converged,
         history,
         float(np.log(max(np.mean(labels < 0), 1.0 / max(n, 1))) + log_volume_density),
-        0.0 if noise_scale is None else float(growth),
+        float(growth) if noise_scale is not None else 0.0,
+        static,
+        moving,
     )
+
+
+def _gather_static_world(models, root, d, sigma_floor, share, min_motion):
+    """:func:`merge_static_world` on the clusters left by ``root``; composes the roots.
+
+    Returns the static world's cluster (-1 if none), the models, the composed roots, the
+    number of merges and the slow clusters (see :func:`merge_static_world`).
+    """
+    none = (-1, models, root, 0, np.empty(0, dtype=np.intp))
+    if share is None:
+        return none
+    survivors = np.flatnonzero(root == np.arange(len(root)))
+    static, sub_root, sub_models, n_merges, slow = merge_static_world(
+        models.take(survivors), d, sigma_floor, share=share, min_motion=min_motion
+    )
+    if static < 0:
+        return none
+    models = models.take(np.arange(len(root)))
+    for name in ("rotations", "translations", "sigmas", "squared_error"):
+        getattr(models, name)[survivors] = getattr(sub_models, name)
+    for name, value in vars(sub_models.moments).items():
+        getattr(models.moments, name)[survivors] = value
+    remap = np.arange(len(root))
+    remap[survivors] = survivors[sub_root]
+    return int(survivors[static]), models, remap[root], n_merges, survivors[slow]
+
+
+def _unexplained(a, b, labels, static, models, noise_scale, confidence):
+    """Outliers, and the static world's members beyond its inlier quantile.
+
+    An object that moves slowly (a pedestrian, 0.1 m between sweeps) hides in the static
+    world when its noise is a few centimetres: unlikely under the static motion, yet
+    likelier than an outlier. Offered to the proposals, such members form a cluster of
+    their own only if they share a motion that pays for itself.
+    """
+    unexplained = labels < 0
+    if static < 0:
+        return unexplained
+    rows = np.flatnonzero(labels == static)
+    sq = squared_residuals(
+        a[rows],
+        b[rows],
+        np.zeros(len(rows), dtype=np.intp),
+        models.rotations[static][None],
+        models.translations[static][None],
+    )
+    if noise_scale is not None:
+        sq /= noise_scale[rows] ** 2
+    limit = chi2.ppf(confidence, a.shape[1]) * models.sigmas[static] ** 2
+    unexplained[rows[sq > limit]] = True
+    return unexplained
+
+
+def _position(kept, cluster):
+    """Where ``cluster`` landed among the ``kept`` clusters (-1 if dropped or -1)."""
+    if cluster < 0:
+        return -1
+    where = np.flatnonzero(kept == cluster)
+    return int(where[0]) if len(where) else -1

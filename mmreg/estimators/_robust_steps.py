@@ -17,6 +17,8 @@
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from scipy.special import gamma
 from scipy.stats import binom, chi2
@@ -35,7 +37,10 @@ __all__ = [
     "estimate_range_growth",
     "fit_clusters",
     "log_uniform_density",
+    "join_moving_pieces",
     "merge_adjacent",
+    "merge_static_world",
+    "motion_gap",
     "pool_sigmas",
     "propose_clusters",
     "range_noise_scale",
@@ -125,14 +130,17 @@ def range_noise_scale(a, growth):
     return 1.0 + growth * np.einsum("ij,ij->i", a, a)
 
 
-def estimate_range_growth(a, squared, labels, n_clusters, sigma_floor, *, n_grid=25):
+def estimate_range_growth(
+    a, squared, labels, n_clusters, sigma_floor, *, n_grid=25, per_cluster=True
+):
     """Maximum-likelihood ``growth`` of :func:`range_noise_scale` for the clusters given.
 
-    The noise scale ``sigma`` is shared by the clusters, like ``growth`` (both are the
-    sensor's). The likelihood of the residuals ``squared`` (``r_i^2``, of the clustered
-    correspondences) is maximised over 0 and a logarithmic grid of ``n_grid`` values
-    around ``1 / median(||a||^2)``, ``sigma_j`` profiled out in closed form; a growth
-    above 0 must raise it by more than the BIC price of one parameter.
+    ``growth`` is the sensor's, shared by the clusters; each cluster keeps its own
+    ``sigma_j`` (``per_cluster=False``: one ``sigma`` for all). The likelihood of the
+    residuals ``squared`` (``r_i^2``, of the clustered correspondences) is maximised
+    over 0 and a logarithmic grid of ``n_grid`` values around ``1 / median(||a||^2)``,
+    ``sigma_j`` profiled out in closed form; a growth above 0 must raise it by more than
+    the BIC price of one parameter.
     """
     rows = np.flatnonzero((labels >= 0) & np.isfinite(squared))
     if len(rows) < 2 or n_clusters == 0:
@@ -143,9 +151,11 @@ def estimate_range_growth(a, squared, labels, n_clusters, sigma_floor, *, n_grid
     if typical <= 0:
         return 0.0
     grid = np.concatenate([[0.0], np.logspace(-3, 3, n_grid) / typical])
-    # One noise scale for all clusters (see pool_sigmas).
-    j = np.zeros(len(rows), dtype=np.intp)
-    n_clusters = 1
+    if per_cluster:
+        j = labels[rows]
+    else:  # one noise scale for all clusters (see pool_sigmas)
+        j = np.zeros(len(rows), dtype=np.intp)
+        n_clusters = 1
     sizes = np.bincount(j, minlength=n_clusters)
     floor2 = sigma_floor**2
     log_like = np.empty(len(grid))
@@ -177,40 +187,101 @@ def pool_sigmas(models, d, sigma_floor):
     return sigma
 
 
-def trimmed_fit(
-    a, b, labels, n_clusters, sigma_floor, noise_scale=None, *, confidence=0.999, rounds=1
-):
-    """M-step on inliers: fit, drop residuals beyond a robust scale, refit.
+def group_median(values, labels, n_groups):
+    """Median of ``values`` over each group ``0..n_groups-1`` (NaN for an empty group).
 
-    Each round fits every cluster's motion on its current inliers, estimates the noise
-    scale robustly from all members (``sigma^2 = median(r^2 / g^2) / median(chi2_d)``,
-    valid with up to half of the correspondences wrong) and keeps as inliers the members
-    whose normalised squared residual is within the ``confidence`` quantile of
-    ``sigma^2 chi2_d``. One round is enough when the E-step runs in between: it has
-    already left out the wrong correspondences of the last iteration. The clusters
-    share one noise scale (:func:`pool_sigmas`).
+    The lower median for an even count; rows with a negative label are ignored.
+    """
+    rows = np.flatnonzero(labels >= 0)
+    out = np.full(n_groups, np.nan)
+    if not len(rows):
+        return out
+    own = labels[rows]
+    order = np.lexsort((values[rows], own))
+    counts = np.bincount(own, minlength=n_groups)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    full = np.flatnonzero(counts > 0)
+    out[full] = values[rows][order][starts[full] + (counts[full] - 1) // 2]
+    return out
+
+
+def robust_scales(squared, labels, n_clusters, d):
+    """Each cluster's robust noise scale, and the scene's: ``sqrt(median(r^2) / median(chi2_d))``.
+
+    Unharmed by up to half of a cluster's correspondences being wrong. The scene's scale
+    (over every clustered correspondence) is the sensor's noise; no object's noise is
+    taken to be smaller, so a cluster's scale never falls below it.
+
+    Returns
+    -------
+    scales : ndarray of shape (n_clusters,)
+    scene_scale : float
+    """
+    median_chi2 = chi2.ppf(0.5, d)
+    member = labels >= 0
+    scene = float(np.sqrt(np.median(squared[member]) / median_chi2)) if member.any() else 0.0
+    scales = np.sqrt(group_median(squared, labels, n_clusters) / median_chi2)
+    scales = np.where(np.isfinite(scales), np.maximum(scales, scene), scene)
+    return scales, scene
+
+
+def trimmed_fit(
+    a,
+    b,
+    labels,
+    n_clusters,
+    sigma_floor,
+    noise_scale=None,
+    *,
+    confidence=0.999,
+    rounds=1,
+    per_cluster=True,
+):
+    """M-step on inliers: fit, drop residuals beyond each cluster's robust scale, refit.
+
+    Each round fits every cluster's motion on its current inliers, estimates each
+    cluster's noise scale robustly from all its members (:func:`robust_scales`) and keeps
+    as inliers the members whose normalised squared residual is within the
+    ``confidence`` quantile of ``sigma_j^2 chi2_d``. One round is enough when the E-step
+    runs in between: it has already left out the wrong correspondences of the last
+    iteration. Each cluster keeps a noise scale of its own, as in Algorithm 1: a scene
+    flow network errs by a few millimetres on the static world and by centimetres on a
+    moving car (its error grows with the motion), and one shared scale would make every
+    flow of the car an outlier. The scales are floored at the scene's own.
+    ``per_cluster=False``: one scale for all clusters, robust for the trimming and pooled
+    without bias afterwards (:func:`pool_sigmas`), so that a cluster of wrong
+    correspondences cannot pass itself off as an object with a large noise of its own.
 
     Returns
     -------
     inliers : ndarray of shape (n,)
         ``labels`` with the trimmed correspondences set to -1.
     models : ClusterModels
-        Fitted on the inliers.
+        Fitted on the inliers, with ``sigmas`` the unbiased scale of each cluster's
+        inliers (at least the scene's scale and ``sigma_floor``).
     """
     d = a.shape[1]
     limit = chi2.ppf(confidence, d)
-    median_chi2 = chi2.ppf(0.5, d)
     g2 = 1.0 if noise_scale is None else noise_scale**2
     member = labels >= 0
     inliers = labels
+    scene = sigma_floor
     for _ in range(rounds):
         models = fit_clusters(a, b, inliers, n_clusters, sigma_floor, noise_scale)
         sq = squared_residuals(a, b, labels, models.rotations, models.translations) / g2
-        scale2 = np.median(sq[member]) / median_chi2 if member.any() else 0.0
-        keep = member & (sq <= limit * max(scale2, sigma_floor**2))
+        if per_cluster:
+            scales, scene = robust_scales(sq, labels, n_clusters, d)
+            scales = np.append(np.maximum(scales, sigma_floor), 0.0)  # labels -1 read the 0
+            keep = member & (sq <= limit * scales[labels] ** 2)
+        else:
+            scale2 = np.median(sq[member]) / chi2.ppf(0.5, d) if member.any() else 0.0
+            keep = member & (sq <= limit * max(scale2, sigma_floor**2))
         inliers = np.where(keep, labels, -1)
     models = fit_clusters(a, b, inliers, n_clusters, sigma_floor, noise_scale)
-    pool_sigmas(models, d, sigma_floor)
+    if not per_cluster:
+        pool_sigmas(models, d, sigma_floor)
+        return inliers, models
+    models.sigmas = np.maximum(models.sigmas, max(scene, sigma_floor))
     return inliers, models
 
 
@@ -403,7 +474,12 @@ def merge_adjacent(models, pairs, d, sigma_floor):
         keep, gone = pairs[chosen, 0], pairs[chosen, 1]
         merged = models.moments.take(keep) + models.moments.take(gone)
         refit = _models_from_moments(merged, d, sigma_floor)
-        refit.sigmas[:] = models.sigmas[keep]  # the shared noise scale
+        # The merged cluster's noise: the two scales pooled by size.
+        size_keep, size_gone = models.moments.size[keep], models.moments.size[gone]
+        refit.sigmas = np.sqrt(
+            (size_keep * models.sigmas[keep] ** 2 + size_gone * models.sigmas[gone] ** 2)
+            / np.maximum(size_keep + size_gone, 1)
+        )
         for name in ("rotations", "translations", "sigmas", "squared_error"):
             getattr(models, name)[keep] = getattr(refit, name)
         for name, value in vars(merged).items():
@@ -423,6 +499,151 @@ def merge_adjacent(models, pairs, d, sigma_floor):
     return root, models, n_merges
 
 
+def motion_gap(models, reference, clusters):
+    """RMS distance between where each cluster's motion and ``reference``'s carry its points.
+
+    From the sufficient statistics: by Pythagoras, the squared error of cluster ``j``
+    under the reference motion exceeds that under its own by (about, the rotations not
+    being a linear family) the summed squared distance between the two motions' images
+    of its points. ``reference`` is one cluster, or one per entry of ``clusters``.
+    """
+    clusters = np.asarray(clusters, dtype=np.intp)
+    reference = np.broadcast_to(np.asarray(reference, dtype=np.intp), clusters.shape)
+    moments = models.moments.take(clusters)
+    excess = (
+        moments.squared_error(models.rotations[reference], models.translations[reference])
+        - models.squared_error[clusters]
+    )
+    return np.sqrt(np.maximum(excess, 0.0) / np.maximum(moments.count, 1e-300))
+
+
+def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolerance=0.2):
+    """Merge touching moving clusters whose motions agree within ``tolerance`` of the motion.
+
+    A scene-flow network errs on a moving object in proportion to its motion, and not
+    rigidly: ZeroFlow's flow on a car 1.1 m into its motion bends by 10-30 cm from front
+    to back. Each part of the car then fits a rigid motion of its own, and the test of
+    :func:`merge_adjacent`, which trusts the residuals, keeps them apart. Two moving
+    clusters (not the ``static`` world) are one object when they touch (points within
+    three typical spacings of the moving points) and each one's motion carries the
+    other's points, RMS, within ``tolerance`` times the smaller of their motions
+    relative to the static world. Cars in one lane move alike too, but do not touch.
+
+    Returns
+    -------
+    root : ndarray of shape (K,)
+        The cluster each cluster was merged into (itself if none).
+    models : ClusterModels
+        Indexed like the input; the entries of merged roots refitted.
+    n_merges : int
+    """
+    k = len(models.sigmas)
+    root = np.arange(k)
+    if static < 0 or k < 3:
+        return root, models, 0
+    rows = np.flatnonzero((labels >= 0) & (labels != static))
+    if len(rows) < 2:
+        return root, models, 0
+    pts, own = points[rows], labels[rows]
+    tree = cKDTree(pts)
+    nearest, _ = tree.query(pts, k=2)
+    pairs = tree.query_pairs(3.0 * float(np.median(nearest[:, 1])), output_type="ndarray")
+    pairs = own[pairs]
+    pairs = np.unique(np.sort(pairs[pairs[:, 0] != pairs[:, 1]], axis=1), axis=0)
+    if not len(pairs):
+        return root, models, 0
+    i, j = pairs[:, 0], pairs[:, 1]
+    motion = np.minimum(motion_gap(models, static, i), motion_gap(models, static, j))
+    gap = np.maximum(motion_gap(models, i, j), motion_gap(models, j, i))
+    pairs = pairs[gap <= tolerance * motion]
+    if not len(pairs):
+        return root, models, 0
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(k, k))
+    _, component = connected_components(graph, directed=False)
+    first = np.full(k, k, dtype=np.intp)
+    np.minimum.at(first, component, np.arange(k))
+    root = first[component]
+    models = models.take(np.arange(k))  # a copy: merged roots are overwritten
+    sizes = models.moments.size.astype(float)
+    for target in np.unique(root[root != np.arange(k)]):
+        group = np.flatnonzero(root == target)
+        merged = models.moments.take(group[:1])
+        for member in group[1:]:
+            merged = merged + models.moments.take([member])
+        refit = _models_from_moments(merged, d, sigma_floor)
+        refit.sigmas = np.sqrt(
+            np.sum(sizes[group] * models.sigmas[group] ** 2) / max(sizes[group].sum(), 1)
+        )[None]
+        for name in ("rotations", "translations", "sigmas", "squared_error"):
+            getattr(models, name)[target] = getattr(refit, name)[0]
+        for name, value in vars(merged).items():
+            getattr(models.moments, name)[target] = value[0]
+    return root, models, int(np.count_nonzero(root != np.arange(k)))
+
+
+def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
+    """Find the static world and gather its pieces, however far apart.
+
+    The static world is the dominant motion (the ego motion of the sensor, for a scene
+    seen from a moving vehicle): the largest cluster, with every cluster that shares its
+    motion (the likelihood-ratio test of :func:`merge_adjacent`, without the distance
+    gate) or moves less than ``min_motion`` (RMS, :func:`motion_gap`) relative to it, if
+    together they hold at least ``share`` of the clustered correspondences. Clusters
+    that share its motion merge into it. Those that only move less than ``min_motion``
+    (a parked car whose flow carries a centimetre of annotation jitter) are *slow*: they
+    keep their own motion, so that their correspondences are not outliers of the static
+    world's, and are reported as part of it. Anything that moves alike but is not the
+    majority keeps the gate of eq. (7): two far-apart objects with one motion stay two
+    objects (the paper's Exp. 3).
+
+    Returns
+    -------
+    static : int
+        The static world's cluster, or -1 if no motion holds ``share`` of the scene.
+    root : ndarray of shape (K,)
+        The cluster each cluster was merged into (itself if none).
+    models : ClusterModels
+        Indexed like the input; the static world's entry refitted.
+    n_merges : int
+    slow : ndarray of int
+        The slow clusters.
+    """
+    k = len(models.sigmas)
+    root = np.arange(k)
+    none = (-1, root, models, 0, np.empty(0, dtype=np.intp))
+    sizes = models.moments.size
+    if k == 0 or sizes.sum() == 0:
+        return none
+    static = int(np.argmax(sizes))
+    others = np.flatnonzero((np.arange(k) != static) & (sizes > 0))
+    agree = slow = np.zeros(len(others), dtype=bool)
+    if len(others):
+        pairs = np.column_stack([np.full(len(others), static), others])
+        agree = _merge_ratio(models, pairs, d) < 1.0
+        slow = ~agree & (motion_gap(models, static, others) < min_motion)
+    joined, slow = others[agree], others[slow]
+    if sizes[static] + sizes[joined].sum() + sizes[slow].sum() < share * sizes.sum():
+        return none
+    if not len(joined):
+        return static, root, models, 0, slow
+    models = models.take(np.arange(k))  # a copy: the static world's entry is overwritten
+    group = np.concatenate([[static], joined])
+    merged = models.moments.take(group[:1])
+    for j in joined:
+        merged = merged + models.moments.take([j])
+    refit = _models_from_moments(merged, d, sigma_floor)
+    # The static world's noise: the scales of its pieces pooled by size.
+    refit.sigmas = np.sqrt(
+        np.sum(sizes[group] * models.sigmas[group] ** 2) / max(sizes[group].sum(), 1)
+    )[None]
+    for name in ("rotations", "translations", "sigmas", "squared_error"):
+        getattr(models, name)[static] = getattr(refit, name)[0]
+    for name, value in vars(merged).items():
+        getattr(models.moments, name)[static] = value[0]
+    root[joined] = static
+    return static, root, models, len(joined), slow
+
+
 def _local_samples(points, n_samples, size, rng):
     """Minimal samples: a random seed and ``size - 1`` of its nearest neighbours.
 
@@ -438,6 +659,24 @@ def _local_samples(points, n_samples, size, rng):
         near, 1 + rng.randint(max(k_near - 1, 1), size=(n_samples, size - 1)), axis=1
     )
     return np.column_stack([seeds, picks])
+
+
+def _local_translations(points, targets, n_samples, reference, rng, k=9):
+    """Hypotheses that turn like ``reference`` and shift by a neighbourhood's mean.
+
+    Over the 0.1 s between two sweeps a pedestrian or a car turns little relative to the
+    static world: the static world's rotation and the mean of ``b - R a`` over a random
+    seed's ``k`` nearest neighbours is a motion hypothesis whose noise is averaged over
+    ``k`` correspondences, where a three-point sample on a small object amplifies it.
+    """
+    d = points.shape[1]
+    rotation = np.eye(d) if reference is None else reference[0]
+    k = min(k, len(points))
+    seeds = rng.randint(len(points), size=n_samples)
+    _, near = cKDTree(points).query(points[seeds], k=k)
+    near = np.asarray(near).reshape(n_samples, k)
+    shifts = (targets[near] - points[near] @ rotation.T).mean(axis=1)
+    return np.repeat(rotation[None], n_samples, axis=0), shifts
 
 
 def _explains_its_surroundings(points, inliers):
@@ -464,7 +703,7 @@ def _concatenate_moments(first, second):
     )
 
 
-def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0):
+def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0, exempt=-1):
     """Clusters that are all boundary: a layer along another cluster, no interior.
 
     Scene-flow networks smear the flow of one surface over the pixels next to it, so
@@ -484,6 +723,9 @@ def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0):
     spacing : ndarray of shape (n,)
         Distance from each point to its nearest neighbour among all points.
     thickness : float, default=3.0
+    exempt : int, default=-1
+        A cluster that is never a layer (the static world); its points are not queried,
+        which saves most of the work on a street scene.
 
     Returns
     -------
@@ -495,8 +737,9 @@ def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0):
         return np.empty(0, dtype=np.intp)
     own = labels[rows]
     bound = thickness * float(np.max(spacing[rows]))
+    queried = np.flatnonzero(own != exempt)
     source, target, distance = nearest_in_other_component(
-        points[rows], own, max_distance=bound, workers=-1
+        points[rows], own, max_distance=bound, sources=queried
     )
     gap = np.full(len(rows), np.inf)
     gap[source] = distance
@@ -509,7 +752,10 @@ def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0):
     typical = np.zeros(n_clusters)
     spacing_order = np.lexsort((spacing[rows], own))
     typical[full] = spacing[rows][spacing_order][starts[full] + (counts[full] - 1) // 2]
-    return np.flatnonzero(median_gap <= thickness * typical)
+    layers = median_gap <= thickness * typical
+    if exempt >= 0:
+        layers[exempt] = False
+    return np.flatnonzero(layers)
 
 
 def drop_small_clusters(labels, counts, min_cluster_size):
@@ -518,6 +764,65 @@ def drop_small_clusters(labels, counts, min_cluster_size):
     position = np.full(len(counts) + 1, -1, dtype=np.intp)
     position[:-1][kept] = np.arange(np.count_nonzero(kept))
     return position[labels], np.flatnonzero(kept)
+
+
+def _best_hypothesis(sq, grid, allowed, d, chi2_limit, log_g, n_total, log_outlier):
+    """The (hypothesis, noise scale) whose inliers gain most over the outlier component.
+
+    ``sq`` (h, m) are squared residuals normalised by each correspondence's ``g_i``; the
+    gain of scale ``s`` is ``sum_inliers [log N(r_i; 0, (s g_i)^2 I) + log(k / n) -
+    log_outlier]`` over the ``k`` inliers ``sq <= chi2_limit s^2``, and ``allowed`` (h, S)
+    says which scales of ``grid`` each hypothesis may take. Returns the hypothesis' index
+    and its scale.
+    """
+    best_gain, best, best_scale = -np.inf, 0, grid[0]
+    for k, sigma in enumerate(grid):
+        if not allowed[:, k].any():
+            continue
+        inlier = sq <= chi2_limit * sigma**2
+        count = inlier.sum(axis=1)
+        gain = (
+            -0.5 * np.where(inlier, sq, 0.0).sum(axis=1) / sigma**2
+            - d * np.where(inlier, log_g[None], 0.0).sum(axis=1)
+            - count * d * (np.log(sigma) + 0.5 * _LOG_2PI)
+            + count * (np.log(np.maximum(count, 1) / n_total) - log_outlier)
+        )
+        gain = np.where(allowed[:, k] & (count > 0), gain, -np.inf)
+        h = int(np.argmax(gain))
+        if gain[h] > best_gain:
+            best_gain, best, best_scale = gain[h], h, sigma
+    return best, float(best_scale)
+
+
+def _shares_a_motion(models, proposal, d):
+    """The merge test of :func:`merge_adjacent` between the proposal and every cluster."""
+    both = ClusterModels(
+        *(
+            np.concatenate([getattr(models, name), getattr(proposal, name)])
+            for name in ("rotations", "translations", "sigmas")
+        ),
+        _concatenate_moments(models.moments, proposal.moments),
+        np.concatenate([models.squared_error, proposal.squared_error]),
+    )
+    k = len(models.sigmas)
+    pairs = np.column_stack([np.arange(k), np.full(k, k)])
+    return bool(np.any(_merge_ratio(both, pairs, d) < 1.0))
+
+
+def _has_its_motion(models, proposal, d):
+    """Whether a current cluster's motion explains the proposal's inliers as well as its own.
+
+    Judged on the proposal's own noise scale: its inliers' squared error under cluster
+    ``j``'s motion may exceed that under their own by at most the BIC price of a motion.
+    (A two-sided merge test would let a cluster with a large noise scale of its own claim
+    any proposal.)
+    """
+    k = len(models.sigmas)
+    moments = proposal.moments.take(np.zeros(k, dtype=np.intp))
+    excess = moments.squared_error(models.rotations, models.translations)
+    excess = (excess - proposal.squared_error[0]) / proposal.sigmas[0] ** 2
+    price = motion_parameters(d) * np.log(max(int(proposal.moments.size[0]), 2))
+    return bool(np.any(excess < price))
 
 
 def propose_clusters(
@@ -537,26 +842,37 @@ def propose_clusters(
     noise_scale=None,
     n_hypotheses=32,
     confidence=0.999,
+    reference=None,
+    max_noise_ratio=0.1,
+    n_scales=7,
+    per_cluster=True,
 ):
     """New clusters from groups of unexplained correspondences that share a motion.
 
     The unexplained correspondences (labelled -1) are split into ``radius``-connected
     groups of their a-points; in every group of at least ``min_cluster_size``, minimal
     samples are drawn locally (a random seed and two of its nearest unexplained
-    neighbours) and the hypothesis with most inliers (residual within the ``confidence``
-    quantile of ``(scale g_i)^2 chi2_d``) is refitted on them. It becomes a cluster only if its
-    inliers' log-likelihood under it beats that under the outlier density by more than
-    the BIC price of a motion and a noise scale, and if so many inliers are not to be
-    expected by chance: with ``p`` the share of the scene's volume ``V`` within the
-    inlier radius of a point's predicted position, the number of false alarms
-    ``N_tests P(Binomial(m - 3, p) >= k - 3)`` of ``k`` inliers among ``m`` must stay
-    below 1, ``N_tests`` counting every hypothesis drawn (the a-contrario test of
-    AC-RANSAC, Moisan and Stival 2004). Wrong correspondences that agree on no motion
-    never form a cluster. Nor does a motion that one of the ``models`` (the current
-    clusters) already has, by the merge test of :func:`merge_adjacent`: a proposal must
-    bring a new motion. Points that move like a cluster beyond the gate are flow that
-    bled across an object's silhouette far more often than another object: separate
-    objects that move alike come from the initial clusters, as eq. (7) intends.
+    neighbours). Each hypothesis is scored at every noise scale ``sigma`` of the grid
+    ``scale * 2^k``, ``k < n_scales``, up to ``max_noise_ratio`` times how far it moves
+    the points relative to the ``reference`` motion (the static world's; the identity if
+    None): a flow network errs in proportion to the motion, so a moving object's flow is
+    noisier than the static world's, but never by more than a fraction of its motion.
+    The (hypothesis, scale) whose inliers (residual within the ``confidence`` quantile
+    of ``(sigma g_i)^2 chi2_d``) gain most log-likelihood over the outlier component
+    wins (the noise scale is searched, as MAGSAC marginalises it) and is refitted on
+    them. It becomes a cluster only if its inliers' log-likelihood under it beats that
+    under the outlier density by more than the BIC price of a motion and a noise scale,
+    and if so many inliers are not to be expected by chance: with ``p`` the share of the
+    scene's volume ``V`` within the inlier radius of a point's predicted position, the
+    number of false alarms ``N_tests P(Binomial(m - 3, p) >= k - 3)`` of ``k`` inliers
+    among ``m`` must stay below 1, ``N_tests`` counting every hypothesis drawn (the
+    a-contrario test of AC-RANSAC, Moisan and Stival 2004). Wrong correspondences that
+    agree on no motion never form a cluster. Nor does a motion that one of the
+    ``models`` (the current clusters) already has, by the merge test of
+    :func:`merge_adjacent`: a proposal must bring a new motion. Points that move like a
+    cluster beyond the gate are flow that bled across an object's silhouette far more
+    often than another object: separate objects that move alike come from the initial
+    clusters, as eq. (7) intends.
 
     Returns
     -------
@@ -572,8 +888,9 @@ def propose_clusters(
         return []
     _, component = tau_components(a[rows], radius)
     counts = np.bincount(component)
-    limit = chi2.ppf(confidence, d) * scale**2
+    chi2_limit = chi2.ppf(confidence, d)
     price = 0.5 * (motion_parameters(d) + 1) * np.log(n_total)
+    grid = scale * 2.0 ** np.arange(n_scales)
     groups = np.flatnonzero(counts >= max(min_cluster_size, size + 1))
     n_tests = max(len(groups) * n_hypotheses, 1)
     # Volume of a d-ball of radius 1.
@@ -584,17 +901,37 @@ def propose_clusters(
         pa, pb, g = a[members], b[members], noise_scale[members]
         samples = _local_samples(pa, n_hypotheses, size, rng)
         rotations, translations, valid = fit_minimal_samples(pa, pb, samples)
+        if per_cluster:
+            turn, shift = _local_translations(pa, pb, n_hypotheses, reference, rng)
+            rotations = np.concatenate([rotations, turn])
+            translations = np.concatenate([translations, shift])
         if not len(rotations):
             continue
         moved = np.einsum("hij,nj->hni", rotations, pa) + translations[:, None, :]
         sq = np.einsum("hni,hni->hn", pb[None] - moved, pb[None] - moved) / g**2
-        best = int(np.argmax((sq <= limit).sum(axis=1)))
+        if not per_cluster:  # the shared scale: the hypothesis with most inliers wins
+            sigma = scale
+            best = int(np.argmax((sq <= chi2_limit * sigma**2).sum(axis=1)))
+        else:
+            base = pa if reference is None else pa @ reference[0].T + reference[1]
+            motion = np.median(np.linalg.norm(moved - base[None], axis=2), axis=1)
+            best, sigma = _best_hypothesis(
+                sq,
+                grid,
+                grid <= np.maximum(scale, max_noise_ratio * motion)[:, None],
+                d,
+                chi2_limit,
+                np.log(g),
+                n_total,
+                log_outlier,
+            )
+        limit = chi2_limit * sigma**2
         inliers = np.flatnonzero(sq[best] <= limit)
         if len(inliers) < min_cluster_size or not _explains_its_surroundings(pa, inliers):
             continue
         one = np.zeros(len(inliers), dtype=np.intp)
         model = fit_clusters(pa[inliers], pb[inliers], one, 1, sigma_floor, g[inliers])
-        model.sigmas[:] = sigma = scale  # the shared noise scale
+        model.sigmas[:] = sigma
         log_like = -0.5 * model.squared_error[0] / sigma**2 - d * np.sum(
             np.log(sigma * g[inliers]) + 0.5 * _LOG_2PI
         )
@@ -606,18 +943,9 @@ def propose_clusters(
         tail = binom.sf(len(inliers) - size - 1, len(members) - size, chance)
         if n_tests * tail >= 1.0:
             continue
-        if len(models.sigmas):
-            both = ClusterModels(
-                *(
-                    np.concatenate([getattr(models, name), getattr(model, name)])
-                    for name in ("rotations", "translations", "sigmas")
-                ),
-                _concatenate_moments(models.moments, model.moments),
-                np.concatenate([models.squared_error, model.squared_error]),
-            )
-            k = len(models.sigmas)
-            pairs = np.column_stack([np.arange(k), np.full(k, k)])
-            if np.any(_merge_ratio(both, pairs, d) < 1.0):
-                continue
+        if len(models.sigmas) and (
+            _has_its_motion(models, model, d) if per_cluster else _shares_a_motion(models, model, d)
+        ):
+            continue
         accepted.append(members[inliers])
     return accepted
