@@ -5,6 +5,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -108,6 +109,8 @@ def test_benchmark_on_fake_data(real_benchmark, fake_data, tmp_path, capsys):
     gt = table["scene"].str.endswith("/gt")
     assert (table.loc[gt, "epe_in"] < 1e-9).all()
     assert (table.loc[~gt, "epe_in"] > 0.005).all()
+    assert (table["time_s"] >= table["init_s"]).all()
+    assert (table.loc[table["method"] == "sequential_ransac", "init_s"] == 0).all()
     markdown = (out / "real.md").read_text()
     assert "| scene" in markdown and "av2_api_7fab2350/noisy" in markdown
     assert "3-way" in capsys.readouterr().out
@@ -151,3 +154,16 @@ def test_ablation_runs_or_says_why(real_benchmark, fake_data, tmp_path, capsys):
     else:
         table = pd.read_csv(out / "real_ablation.csv")
         assert list(table["method"]) == ["mmreg", *(f"mmreg-no-{s}" for s in steps)]
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # 580 points cannot make 100 clusters
+def test_shared_init_changes_no_result(real_benchmark, fake_data):
+    loader, _ = real_benchmark.import_loader(fake_data)
+    case = real_benchmark.make_cases(loader, fake_data, "av2_api_7fab2350", ("noisy",), 0)[0][0]
+    X = np.hstack([case.a, case.b])
+    shared = real_benchmark.SharedInit(X, 0)
+    for method in ("mmreg", "paper", "naive", "t_linkage"):
+        alone = real_benchmark.build_method(method, 0).fit(X)
+        est = real_benchmark.build_method(method, 0)
+        shared.give(est)
+        np.testing.assert_array_equal(est.fit(X).labels_, alone.labels_)
