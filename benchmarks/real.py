@@ -3,8 +3,10 @@
 ``python benchmarks/real.py --data ../shared/realdata`` runs every method on every scene
 found there, prints one Markdown table and writes ``benchmarks/results/real.csv`` (one row
 per scene, method and seed) and ``real.md`` (the table and what its columns mean).
-``--ablation`` instead runs the default with each robust step turned off in turn and
-writes ``real_ablation.csv`` and ``real_ablation.md``.
+``--ablation`` instead runs the default with each robust step turned off in turn
+(``ROBUST_STEPS``, ``skip_steps``) and writes ``real_ablation.csv`` and ``.md``;
+``--ablation sweep`` does the same for ``variant="sweep"`` (``real_ablation_sweep.*``).
+With ``--scenes`` it runs in minutes rather than the better part of an hour.
 
 The data folder is read, never copied: its ``load.py`` is imported at run time and gives
 ``list_scenes(root)`` and ``load_scene(name, root=..., drop_ground=True)`` (see its
@@ -21,7 +23,8 @@ inputs ``b = a + flow_in``:
                                axis on every point (seeded by the seed).
 
 Methods, each with its defaults and tau = 5 m (the paper's street and FlyingThings3D
-setting) where it takes a tau: ``mmreg`` (``MultiModelRegistration()``), ``paper``
+setting) where it takes a tau: ``mmreg`` (``MultiModelRegistration()``), ``sweep``
+(``variant="sweep"``, for real sweeps, where the estimator has it), ``paper``
 (``variant="paper"``) and the baselines of :mod:`mmreg.methods` (``naive``,
 ``sequential_ransac``, ``t_linkage``); any name of ``available_methods()`` works. The
 initialisation is each method's default (Euclidean clustering, 100 clusters). A baseline
@@ -55,7 +58,8 @@ Columns (scored points: ground-truth label >= 0):
                       the CSV (``fd``, ``fs``, ``bs``);
 ``dyn_iou``           IoU of the dynamic class (Argoverse 2's "Dynamic IoU") with the
                       rigid flow's points marked dynamic by the same speed rule relative
-                      to the static cluster's motion;
+                      to the static cluster's motion (every point, when the estimator
+                      says there is no static cluster: ``static_cluster_ == -1``);
 ``epe_obj_in``/``epe_obj``  EPE of the input / rigid flow on each moving object, the mean
                       over objects in the table, each object's in the CSV (``label:epe``);
 ``labelled_-1``       share of all correspondences the method labels -1 (outliers).
@@ -98,7 +102,7 @@ AV2_EVAL_RANGE = 50.0  # metres: Argoverse 2 scores points with |x|, |y| <= 50
 NOISE_STD = 0.02  # metres per axis
 NOISE_SCALE = 0.9  # moving objects' flow is scaled by this in the noisy variant
 
-DEFAULT_METHODS = ("mmreg", "paper", "naive", "sequential_ransac", "t_linkage")
+DEFAULT_METHODS = ("mmreg", "sweep", "paper", "naive", "sequential_ransac", "t_linkage")
 BASELINES = ("naive", "sequential_ransac", "t_linkage")
 
 # The inputs made from each scene; scenes not listed give their ground-truth flow only.
@@ -262,27 +266,52 @@ def robust_steps():
     return tuple(steps), ""
 
 
+def estimator_variants():
+    """The ``variant`` values MultiModelRegistration accepts."""
+    from mmreg import MultiModelRegistration
+
+    for constraint in MultiModelRegistration._parameter_constraints.get("variant", []):
+        options = getattr(constraint, "options", None)
+        if options:
+            return set(options)
+    return {"robust", "paper"}
+
+
+def default_methods():
+    """The default methods that this version of mmreg offers (``sweep`` only if it exists)."""
+    return [m for m in DEFAULT_METHODS if m != "sweep" or "sweep" in estimator_variants()]
+
+
+def _base_and_step(name):
+    """``("mmreg", step)`` for ``"mmreg-no-<step>"``, ``("sweep", step)`` likewise, or None."""
+    for base in ("mmreg", "sweep"):
+        if name.startswith(f"{base}-no-"):
+            return base, name.removeprefix(f"{base}-no-")
+    return None
+
+
 def build_method(name, seed):
     """A new estimator of the benchmark's method ``name``."""
     from mmreg import MultiModelRegistration
 
-    if name == "mmreg":
-        return MultiModelRegistration(tau=TAU, random_state=seed)
-    if name == "paper":
-        return MultiModelRegistration(variant="paper", tau=TAU, random_state=seed)
-    if name.startswith("mmreg-no-"):
-        step = name.removeprefix("mmreg-no-")
-        return MultiModelRegistration(tau=TAU, random_state=seed, skip_steps=(step,))
+    ablated = _base_and_step(name)
+    skip = {} if ablated is None else {"skip_steps": (ablated[1],)}
+    base = name if ablated is None else ablated[0]
+    if base == "mmreg":
+        return MultiModelRegistration(tau=TAU, random_state=seed, **skip)
+    if base in ("sweep", "paper"):
+        return MultiModelRegistration(variant=base, tau=TAU, random_state=seed, **skip)
     return make_method(name, tau=TAU, random_state=seed, strict=False)
 
 
 def check_methods(names):
-    known = set(available_methods()) | {"paper"}
+    extra = {"paper"} | ({"sweep"} & estimator_variants())
+    known = set(available_methods()) | extra
     unknown = [m for m in names if m not in known]
     if unknown:
         raise SystemExit(
             f"real.py: error: unknown method(s) {', '.join(unknown)}; available: "
-            f"{', '.join(['paper', *available_methods()])}"
+            f"{', '.join([*sorted(extra), *available_methods()])}"
         )
 
 
@@ -418,10 +447,14 @@ def score(case, method, est, seconds, caught):
             row["fd" + suffix] = three["foreground_dynamic"]
             row["fs" + suffix] = three["foreground_static"]
             row["bs" + suffix] = three["background_static"]
-        if static >= 0 and (keep & finite).any():
-            static_flow = case.a @ est.rotations_[static].T + est.translations_[static] - case.a
-            rows = keep & finite
-            predicted = dynamic_mask(flow[rows], static_flow[rows])
+        rows = keep & finite
+        if rows.any():
+            if static >= 0:
+                a_rows = case.a[rows]
+                moved = a_rows @ est.rotations_[static].T + est.translations_[static]
+                predicted = dynamic_mask(flow[rows], moved - a_rows)
+            else:  # no static world: the estimator says every cluster moves
+                predicted = np.ones(np.count_nonzero(rows), dtype=bool)
             row["dyn_iou"] = dynamic_iou(case.dynamic[rows], predicted)["dynamic"]
     objects_in = _object_epes(case.flow_true, flow_in, truth, case.moving)
     objects = _object_epes(case.flow_true, flow, truth, case.moving)
@@ -437,8 +470,9 @@ def score(case, method, est, seconds, caught):
 # --- the run -------------------------------------------------------------------------
 
 
-def run(data, scenes=None, methods=DEFAULT_METHODS, seeds=1, max_seconds=60.0, log=print):
+def run(data, scenes=None, methods=None, seeds=1, max_seconds=60.0, log=print):
     """Run the benchmark; return the table (one row per scene, method, seed) and notes."""
+    methods = default_methods() if methods is None else methods
     loader, why = import_loader(data)
     if loader is None:
         return pd.DataFrame(), [f"no data: {why}"]
@@ -588,8 +622,9 @@ def main(argv=None):
     parser.add_argument(
         "--methods",
         type=lambda s: [x for x in s.split(",") if x],
-        default=list(DEFAULT_METHODS),
-        help="comma-separated: mmreg, paper, or any name of mmreg.methods.available_methods()",
+        default=None,
+        help="comma-separated: mmreg, sweep, paper, or any name of "
+        "mmreg.methods.available_methods() (default: mmreg, sweep, paper and the baselines)",
     )
     parser.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 (noise and methods)")
     parser.add_argument("--out", type=Path, default=HERE / "results", help="folder for results")
@@ -601,8 +636,12 @@ def main(argv=None):
     )
     parser.add_argument(
         "--ablation",
-        action="store_true",
-        help="run the default with each robust step turned off in turn (real_ablation.*)",
+        nargs="?",
+        const="robust",
+        default=None,
+        choices=("robust", "sweep"),
+        help="run the default (or variant='sweep') with each robust step turned off in turn "
+        "(real_ablation.*, real_ablation_sweep.*)",
     )
     args = parser.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -612,11 +651,16 @@ def main(argv=None):
         if steps is None:
             print(f"Ablation skipped: {why} (the estimator does not offer skip_steps yet).")
             return 0
-        methods = ["mmreg", *(f"mmreg-no-{step}" for step in steps)]
-        stem, title = "real_ablation", "Ablation on real scene flow: the default without each step"
+        if args.ablation not in estimator_variants():
+            print(f"Ablation skipped: MultiModelRegistration has no variant={args.ablation!r}.")
+            return 0
+        base = "mmreg" if args.ablation == "robust" else args.ablation
+        methods = [base, *(f"{base}-no-{step}" for step in steps)]
+        stem = "real_ablation" if args.ablation == "robust" else f"real_ablation_{args.ablation}"
+        title = f"Ablation on real scene flow: {base} without each robust step in turn"
     else:
-        check_methods(args.methods)
-        methods = args.methods
+        methods = default_methods() if args.methods is None else args.methods
+        check_methods(methods)
         stem, title = "real", "Multi-model registration on real scene flow"
 
     table, notes = run(args.data, args.scenes, methods, args.seeds, args.max_seconds)

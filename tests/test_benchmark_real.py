@@ -91,7 +91,8 @@ def test_benchmark_on_fake_data(real_benchmark, fake_data, tmp_path, capsys):
         "av2_api_7fab2350/gt",
         "av2_api_7fab2350/noisy",
     ]
-    methods = ["mmreg", "paper", "naive", "sequential_ransac", "t_linkage"]
+    methods = real_benchmark.default_methods()
+    assert {"mmreg", "paper", "naive", "sequential_ransac", "t_linkage"} <= set(methods)
     assert list(table["scene"].unique()) == scenes
     assert list(table["method"].unique()) == methods
     assert len(table) == len(scenes) * len(methods)
@@ -154,6 +155,8 @@ def test_ablation_runs_or_says_why(real_benchmark, fake_data, tmp_path, capsys):
     else:
         table = pd.read_csv(out / "real_ablation.csv")
         assert list(table["method"]) == ["mmreg", *(f"mmreg-no-{s}" for s in steps)]
+        est = real_benchmark.build_method(f"mmreg-no-{steps[0]}", 0)
+        assert est.get_params()["skip_steps"] == (steps[0],)
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")  # 580 points cannot make 100 clusters
