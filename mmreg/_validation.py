@@ -2,7 +2,52 @@
 
 import numpy as np
 
-__all__ = ["check_labels", "compact_labels", "split_correspondences"]
+__all__ = ["MAX_ABS_COORDINATE", "check_coordinate_range", "check_labels", "compact_labels"]
+__all__ += ["split_correspondences"]
+
+#: The largest coordinate magnitude accepted. Squared distances, and their sums over the
+#: points of a cluster, must stay far from overflowing float64 (largest 1.8e308, whose
+#: square root is 1.3e154): at 1e100 a squared distance is at most about 1e201, and sums
+#: over any realistic number of points stay finite. Larger values (1e150 and more) made
+#: the estimators fail deep inside with unrelated messages, or hang.
+MAX_ABS_COORDINATE = 1e100
+
+
+def check_coordinate_range(X, *, name="X"):
+    """Raise ValueError unless every value of ``X`` lies within +-:data:`MAX_ABS_COORDINATE`.
+
+    Parameters
+    ----------
+    X : ndarray
+        Finite floats (NaN is left to the caller's finiteness check).
+    name : str, default="X"
+        What ``X`` is, for the message.
+
+    Raises
+    ------
+    ValueError
+        Naming the largest magnitude found and the limit.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._validation import check_coordinate_range
+    >>> check_coordinate_range(np.array([[1.0, -2e99]]))
+    >>> check_coordinate_range(np.array([[1.0, 3e150]]))
+    Traceback (most recent call last):
+    ...
+    ValueError: X holds values up to 3e+150 in magnitude; coordinates must lie within ...
+    """
+    X = np.asarray(X)
+    if X.size == 0 or X.dtype.kind not in "iuf":
+        return
+    largest = max(abs(float(X.max())), abs(float(X.min())))  # NaN: never larger
+    if largest > MAX_ABS_COORDINATE:
+        raise ValueError(
+            f"{name} holds values up to {float(largest):.3g} in magnitude; coordinates must "
+            f"lie within +-{MAX_ABS_COORDINATE:.0e} so that squared distances do not "
+            "overflow. Rescale the points (e.g. to metres)."
+        )
 
 
 def split_correspondences(X):
@@ -21,7 +66,8 @@ def split_correspondences(X):
     ------
     ValueError
         If the number of columns is odd: each row must hold a point ``a_i`` and its
-        correspondence ``b_i`` of the same dimension.
+        correspondence ``b_i`` of the same dimension; or if a value exceeds
+        :data:`MAX_ABS_COORDINATE` in magnitude (see :func:`check_coordinate_range`).
     """
     n_columns = X.shape[1]
     if n_columns % 2:
@@ -29,6 +75,7 @@ def split_correspondences(X):
             "X must hold stacked correspondences [a | b] with an even number of columns "
             f"2*d (6 for 3-D points); got X with n_features = {n_columns}."
         )
+    check_coordinate_range(X)
     d = n_columns // 2
     return X[:, :d], X[:, d:]
 

@@ -146,7 +146,8 @@ def test_register_csv_with_labels_init_in_process(files, scene, tmp_path, capsys
 def test_register_default_out_is_named_after_the_input(files, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["register", str(files / "pairs.npy"), "-q"]) == 0
-    assert (tmp_path / "pairs-mmreg" / "labels.npy").exists()
+    (out,) = tmp_path.iterdir()
+    assert out.name.startswith("pairs-mmreg-") and (out / "labels.npy").exists()
 
 
 def test_register_with_masks_init(tmp_path, capsys):
@@ -168,14 +169,18 @@ def test_register_with_masks_init(tmp_path, capsys):
     assert "clusters" in capsys.readouterr().out
 
 
-def test_existing_result_directory_is_updated(files, tmp_path):
+def test_a_folder_of_the_users_files_is_never_touched(files, tmp_path, capsys):
     out = tmp_path / "out"
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     (out / "labels.npy").write_text("stale")
-    assert main(["register", str(files / "pairs.npy"), "--out", str(out), "-q"]) == 0
-    assert (out / "notes.txt").read_text() == "mine"
-    assert mmio.read_labels(out / "labels.npy").shape == (900,)
+    for extra in ([], ["--overwrite"]):
+        code = main(["register", str(files / "pairs.npy"), "--out", str(out), "-q", *extra])
+        assert code == 2
+        assert "notes.txt" in capsys.readouterr().err
+        assert sorted(p.name for p in out.iterdir()) == ["labels.npy", "notes.txt"]
+        assert (out / "labels.npy").read_text() == "stale"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
 def test_nothing_is_written_when_writing_fails(files, tmp_path, monkeypatch, capsys):

@@ -133,3 +133,35 @@ def test_transform_matches_labels_and_assigns_new_points():
     got = init.transform(new).toarray()
     assert got[0].argmax() == init.labels_[core] and got[0].sum() == 1
     assert got[1].sum() == 0
+
+
+# --------------------------------------------------------------------------- default eps
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_default_eps_follows_the_spacing_of_the_points(scale):
+    """eps=None: the same clusters in any unit (a fixed eps=0.05 found none in mm)."""
+    scene = make_scene(n_objects=3, n_points=3000, random_state=0)
+    reference = DBSCANClustering(backend="sklearn").fit(scene.X)
+    scaled = DBSCANClustering(backend="sklearn").fit(scene.X * scale)
+    assert reference.n_clusters_ >= 3
+    assert np.mean(reference.labels_ < 0) < 0.05
+    np.testing.assert_array_equal(scaled.labels_, reference.labels_)
+    assert scaled.eps_ == pytest.approx(reference.eps_ * scale)
+
+
+def test_default_eps_is_four_times_the_median_spacing():
+    grid = np.stack(np.meshgrid(np.arange(12.0), np.arange(12.0), [0.0]), -1).reshape(-1, 3)
+    X = np.hstack([0.3 * grid, 0.3 * grid])
+    init = DBSCANClustering(backend="sklearn").fit(X)
+    assert init.eps_ == pytest.approx(1.2)
+    assert init.n_clusters_ == 1
+    same = np.hstack([np.zeros((10, 3)), np.ones((10, 3))])  # every point the same
+    assert DBSCANClustering(backend="sklearn").fit(same).n_clusters_ == 1
+
+
+def test_all_noise_is_reported():
+    from mmreg.init._dbscan import AllOutliersWarning
+
+    X = blobs(0)
+    with pytest.warns(AllOutliersWarning, match=r"all 150 a-points are noise with eps=0\.001"):
+        init = DBSCANClustering(eps=0.001, backend="sklearn").fit(X)
+    assert init.n_clusters_ == 0 and init.eps_ == 0.001

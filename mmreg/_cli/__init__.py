@@ -10,15 +10,27 @@ their ``pyproject.toml``::
 
 Every error the user can fix (a missing file, a wrong shape, NaN) is one line on stderr,
 ``mmreg: error: FILE: problem``, with exit code 2; ``--debug`` shows the traceback.
+
+Ctrl-C ends a run with exit code 130 and ``mmreg: interrupted``, after removing what the
+run had begun to write. When ``mmreg`` runs as a program (the console scripts,
+``python -m mmreg.cli``), it then leaves with :func:`os._exit`: finalising the interpreter
+while C++ worker threads (scipy's k-d tree queries with ``workers``) still run crashes it.
+
+Heavy modules (Open3D, matplotlib, pandas, the estimators) are imported by the
+subcommands when they run, not to build the parser, so ``mmreg --help`` and
+``mmreg --version`` start quickly.
 """
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
 from importlib.metadata import entry_points
+from pathlib import Path
 
 from mmreg._cli import demo, evaluate, register, view
-from mmreg._cli._common import CLIError, one_line
+from mmreg._cli._common import CLIError, one_line, remove_partial
 
 __all__ = ["BUILTIN_COMMANDS", "ENTRY_POINT_GROUP", "build_parser", "main"]
 
@@ -88,30 +100,69 @@ def build_parser():
     return parser
 
 
+def _is_the_program():
+    """Whether this process is ``mmreg`` itself (not Python calling :func:`main`)."""
+    module = sys.modules.get("__main__")
+    spec = getattr(module, "__spec__", None)
+    if spec is not None and spec.name in ("mmreg.cli", "mmreg._demo", "mmreg._cli"):
+        return True
+    name = Path(getattr(module, "__file__", None) or "").name.lower()
+    return name.removesuffix(".exe").removesuffix("-script.py") in ("mmreg", "mmreg-demo")
+
+
+def _flush():
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):  # a closed pipe or stream
+            stream.flush()
+
+
+def _interrupted():
+    """Clean up after Ctrl-C; return 130, or leave the process at once when it is mmreg."""
+    with contextlib.suppress(ValueError):  # ValueError: not the main thread
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C: no half cleanup
+    remove_partial()
+    with contextlib.suppress(OSError, ValueError):
+        print("mmreg: interrupted", file=sys.stderr)
+    _flush()
+    if _is_the_program():
+        # Worker threads of a k-d tree query may still run: finalising the interpreter
+        # under them crashes it (a segfault instead of exit code 130).
+        os._exit(EXIT_INTERRUPTED)
+    return EXIT_INTERRUPTED
+
+
 def main(argv=None):
-    """Run ``mmreg`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Run ``mmreg`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
+
+    When this process is the ``mmreg`` program, Ctrl-C ends it with exit code 130 at once
+    (:func:`os._exit`, after cleaning up and flushing stdout and stderr).
+    """
+    args = None
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
         return int(args._run(args) or 0)
     except CLIError as error:
-        if args.debug:
+        if args is not None and args.debug:
             raise
+        remove_partial()
         print(f"mmreg: error: {one_line(error)}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:  # e.g. "mmreg demo | head": stop quietly
+        remove_partial()
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_FAILURE
     except KeyboardInterrupt:
-        print("mmreg: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return _interrupted()
     except Exception as error:
-        if args.debug:
+        if args is not None and args.debug:
             raise
+        remove_partial()
+        command = args.command if args is not None else "COMMAND"
         print(
             f"mmreg: error: {type(error).__name__}: {one_line(error)} (run 'mmreg --debug "
-            f"{args.command} ...' for the traceback)",
+            f"{command} ...' for the traceback)",
             file=sys.stderr,
         )
         return EXIT_FAILURE

@@ -12,14 +12,19 @@ A result directory (written by ``mmreg register`` and ``mmreg demo --out``) hold
   ``mmreg evaluate``);
 * ``run.json``: the input, the options and the run's numbers.
 
-It is written whole or not at all: every file goes to a hidden staging folder beside
-the result directory first, and is moved into it only when all of them are written.
+It is written whole or not at all, and never over anything but an earlier result: every
+file goes to a hidden staging folder beside it first, which then takes the result's
+place in one rename (see :func:`write_result_dir`). Where the result goes is checked
+before any work (:func:`check_out`). An interrupted run removes its staging folder
+(:func:`remove_partial`).
 """
 
 import contextlib
+import errno
 import json
 import os
 import shutil
+import signal
 import sys
 import tempfile
 import warnings
@@ -27,10 +32,13 @@ from pathlib import Path
 
 import numpy as np
 
-# A cluster moves relative to the background when the background's motion would carry
-# its a-points, on average, this many times its own RMS residual away from where its
-# own motion takes them.
-MOVING_FACTOR = 3.0
+from mmreg._motion import (
+    MOVING_FACTOR,  # noqa: F401 - the rule of summary.csv's "moving"
+    motion_statistics,
+    moving_clusters,
+    static_cluster,
+)
+
 RESULT_FILES = (
     "labels.npy",
     "motions.json",
@@ -40,6 +48,10 @@ RESULT_FILES = (
     "X.npy",
     "run.json",
 )
+# Files a result directory may also hold (``mmreg demo --out`` adds the ground truth).
+EXTRA_RESULT_FILES = ("truth.npz",)
+# Staging folders (and replaced results) of this process, removed if it is interrupted.
+_PARTIAL = set()
 
 
 # The columns of summary.csv.
@@ -63,6 +75,7 @@ SUMMARY_COLUMNS = [
     "background",
     "relative_rotation_deg",
     "displacement_vs_background",
+    "residual_scale",
     "moving",
 ]
 
@@ -129,10 +142,14 @@ def reported_warnings():
 
 
 class Steps:
-    """A tqdm progress bar over named steps, on stderr; hidden when quiet or not a terminal."""
+    """A tqdm progress bar over named steps, on stderr; hidden when quiet or not a terminal.
 
-    def __init__(self, total, *, quiet=False):
-        from tqdm.auto import tqdm
+    With ``verbose`` and no bar (stderr is not a terminal), every step is announced as a
+    line ``mmreg: <step>`` on stderr instead.
+    """
+
+    def __init__(self, total, *, quiet=False, verbose=False):
+        from tqdm import tqdm
 
         self._bar = tqdm(
             total=total,
@@ -142,9 +159,12 @@ class Steps:
             unit="step",
             bar_format="{desc:<34} {bar:20} {n_fmt}/{total_fmt} [{elapsed}]",
         )
+        self._announce = bool(verbose) and self._bar.disable
 
     @contextlib.contextmanager
     def step(self, description):
+        if self._announce:
+            print(f"mmreg: {description}", file=sys.stderr, flush=True)
         self._bar.set_description_str(description)
         yield
         self._bar.update(1)
@@ -177,6 +197,12 @@ def check_correspondences(X, path):
         raise CLIError(
             f"{path}: {bad.sum()} row(s) hold NaN or infinite values, e.g. row {np.argmax(bad)}"
         )
+    from mmreg._validation import check_coordinate_range
+
+    try:
+        check_coordinate_range(X, name="the correspondences")
+    except ValueError as error:
+        raise CLIError(f"{path}: {one_line(error)}") from None
     return X
 
 
@@ -206,20 +232,20 @@ def rotation_angle_deg(rotations):
 
 def background_label(labels):
     """The largest cluster (the static world, when the camera moves), or None."""
-    ids, sizes = np.unique(labels[labels >= 0], return_counts=True)
-    if not len(ids):
-        return None
-    return int(ids[np.lexsort((ids, -sizes))[0]])
+    label = static_cluster(labels)
+    return None if label < 0 else label
 
 
 def summarize(X, labels, rotations, translations, sigmas=None):
     """One row per cluster: size, motion, residual and motion relative to the background.
 
-    The background is the largest cluster. A cluster is ``moving`` when
-    ``displacement_vs_background`` (the mean distance between where its own motion and
-    the background's motion take its a-points) exceeds :data:`MOVING_FACTOR` (3) times
-    its ``rms_residual`` (the RMS of ``|R a + t - b|`` over its correspondences), floored
-    at 1e-6 times the RMS spread of the b-points so that noiseless data is well posed.
+    The background is the largest cluster. ``displacement_vs_background`` is the median
+    over the cluster's a-points of the distance between where its own motion and the
+    background's motion take them, ``residual_scale`` the RMS residual of its inliers
+    (median + 3 robust standard deviations, so wrong correspondences do not inflate
+    it), ``rms_residual`` the plain RMS of ``|R a + t - b|`` over all its
+    correspondences. A cluster is ``moving`` when the displacement exceeds
+    :data:`MOVING_FACTOR` (3) times the residual scale (:func:`mmreg._motion.moving_clusters`).
 
     Returns a :class:`pandas.DataFrame` (coordinates in the units of the points).
     """
@@ -228,53 +254,46 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     a, b = X[:, :3], X[:, 3:]
     rotations = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
     translations = np.asarray(translations, dtype=float).reshape(-1, 3)
-    reference = background_label(labels)
-    floor = 1e-6 * float(np.sqrt(np.mean(np.sum((b - b.mean(axis=0)) ** 2, axis=1))))
+    n_clusters = len(rotations)
+    static = static_cluster(labels)
+    displacement, scale = motion_statistics(a, b, labels, rotations, translations, static)
+    moving = moving_clusters(a, b, labels, rotations, translations, static)
     angles = rotation_angle_deg(rotations)
-    rows = []
-    for label in range(len(rotations)):
-        members = labels == label
-        pts = a[members]
-        size = int(members.sum())
-        moved = pts @ rotations[label].T + translations[label]
-        residual = np.linalg.norm(moved - b[members], axis=1) if size else np.zeros(0)
-        rms = float(np.sqrt(np.mean(residual**2))) if size else float("nan")
-        row = {
-            "label": label,
-            "size": size,
-            "fraction": size / len(labels),
-            "rotation_angle_deg": float(angles[label]),
-            "tx": translations[label, 0],
-            "ty": translations[label, 1],
-            "tz": translations[label, 2],
-            "translation_norm": float(np.linalg.norm(translations[label])),
-            "sigma": float(sigmas[label]) if sigmas is not None else float("nan"),
-            "rms_residual": rms,
-            "centroid_x": float("nan"),
-            "centroid_y": float("nan"),
-            "centroid_z": float("nan"),
-            "extent_x": float("nan"),
-            "extent_y": float("nan"),
-            "extent_z": float("nan"),
-            "background": label == reference,
-            "relative_rotation_deg": 0.0,
-            "displacement_vs_background": 0.0,
-            "moving": False,
-        }
-        if size:
-            row.update(
-                zip(("centroid_x", "centroid_y", "centroid_z"), pts.mean(axis=0), strict=True)
-            )
-            row.update(zip(("extent_x", "extent_y", "extent_z"), np.ptp(pts, axis=0), strict=True))
-        if size and reference is not None and label != reference:
-            by_background = pts @ rotations[reference].T + translations[reference]
-            displacement = float(np.mean(np.linalg.norm(moved - by_background, axis=1)))
-            relative = rotations[label] @ rotations[reference].T
-            row["relative_rotation_deg"] = float(rotation_angle_deg(relative)[0])
-            row["displacement_vs_background"] = displacement
-            row["moving"] = displacement > MOVING_FACTOR * max(rms, floor)
-        rows.append(row)
-    return pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
+    clustered = np.flatnonzero(labels >= 0)
+    group = labels[clustered]
+    sizes = np.bincount(group, minlength=n_clusters)
+    own = np.einsum("nij,nj->ni", rotations[group], a[clustered]) + translations[group]
+    squared = np.sum((own - b[clustered]) ** 2, axis=1)
+    frame = pd.DataFrame({"label": np.arange(n_clusters), "size": sizes})
+    frame["fraction"] = sizes / max(len(labels), 1)
+    frame["rotation_angle_deg"] = angles
+    frame[["tx", "ty", "tz"]] = translations
+    frame["translation_norm"] = np.linalg.norm(translations, axis=1)
+    frame["sigma"] = (
+        np.asarray(sigmas, dtype=float) if sigmas is not None else np.full(n_clusters, np.nan)
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sums = np.bincount(group, weights=squared, minlength=n_clusters)
+        frame["rms_residual"] = np.where(sizes > 0, np.sqrt(sums / np.maximum(sizes, 1)), np.nan)
+        for axis, name in enumerate("xyz"):
+            total = np.bincount(group, weights=a[clustered, axis], minlength=n_clusters)
+            frame[f"centroid_{name}"] = np.where(sizes > 0, total / np.maximum(sizes, 1), np.nan)
+    low = np.full((n_clusters, 3), np.inf)
+    high = np.full((n_clusters, 3), -np.inf)
+    np.minimum.at(low, group, a[clustered])
+    np.maximum.at(high, group, a[clustered])
+    extent = np.where(sizes[:, None] > 0, high - low, np.nan)
+    frame[["extent_x", "extent_y", "extent_z"]] = extent
+    frame["background"] = frame["label"] == static
+    relative = np.zeros(n_clusters)
+    if static >= 0:
+        relative = rotation_angle_deg(rotations @ rotations[static].T)
+        relative[static] = 0.0
+    frame["relative_rotation_deg"] = relative
+    frame["displacement_vs_background"] = np.nan_to_num(displacement, nan=0.0)
+    frame["residual_scale"] = scale
+    frame["moving"] = moving
+    return frame[SUMMARY_COLUMNS]
 
 
 def format_table(frame, spec):
@@ -288,13 +307,49 @@ def format_table(frame, spec):
     return "\n".join(lines)
 
 
-def render_png(fig, dpi=110):
-    """The PNG bytes of a matplotlib Figure."""
+# Picture formats by extension (those matplotlib writes without extra packages).
+PICTURE_FORMATS = {
+    ".png": "png",
+    ".pdf": "pdf",
+    ".svg": "svg",
+    ".svgz": "svgz",
+    ".eps": "eps",
+    ".ps": "ps",
+    ".jpg": "jpg",
+    ".jpeg": "jpg",
+    ".tif": "tif",
+    ".tiff": "tif",
+    ".webp": "webp",
+}
+
+
+def picture_format(path):
+    """The matplotlib format of a picture file by its extension, or a CLIError naming it."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in PICTURE_FORMATS:
+        raise CLIError(
+            f"{path}: unknown picture format {suffix or '(no extension)'!r}; use one of "
+            f"{', '.join(PICTURE_FORMATS)}"
+        )
+    return PICTURE_FORMATS[suffix]
+
+
+def render_picture(fig, fmt="png", dpi=110):
+    """The bytes of a matplotlib Figure in the format ``fmt`` (``"png"``, ``"pdf"``, ...)."""
     import io
 
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi)
+    with warnings.catch_warnings():
+        # Layout engines warn when a legend or a long title does not fit: not the user's
+        # problem, and the picture is still written.
+        warnings.simplefilter("ignore", UserWarning)
+        fig.savefig(buffer, format=fmt, dpi=dpi)
     return buffer.getvalue()
+
+
+def render_png(fig, dpi=110):
+    """The PNG bytes of a matplotlib Figure."""
+    return render_picture(fig, "png", dpi)
 
 
 def result_figure(X, labels, motions, *, moving=None, view="auto", title=None, camera=None):
@@ -341,26 +396,162 @@ def result_figure(X, labels, motions, *, moving=None, view="auto", title=None, c
     return fig
 
 
-def write_result_dir(
-    out, X, labels, rotations, translations, sigmas, summary, png, run, extra_files=None
-):
-    """Write a result directory whole: into a staging folder, then moved into ``out``.
+def _nearest_existing(path):
+    """``path`` or its nearest ancestor that exists."""
+    path = Path(os.path.abspath(path))
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
 
-    ``extra_files`` maps more file names to their bytes.
+
+def _foreign_files(folder):
+    """Names in ``folder`` that a result directory does not hold (sorted)."""
+    allowed = {*RESULT_FILES, *EXTRA_RESULT_FILES}
+    return sorted(p.name for p in Path(folder).iterdir() if p.name not in allowed)
+
+
+def check_out(out, *, overwrite, option="--out"):
+    """Check, before any work, that a result directory can be written to ``out``.
+
+    ``out`` may be new, an empty folder, or (with ``overwrite``) an earlier result
+    directory: a folder holding nothing but result files. Anything else (a file, a
+    folder of the user's own files, an earlier result without ``overwrite``, a place
+    that cannot be written) is a CLIError naming ``out`` as the user gave it.
+    """
+    out = Path(out)
+    if out.exists() or out.is_symlink():
+        if not out.is_dir():
+            raise CLIError(f"{out}: exists and is not a folder; choose another {option}")
+        try:
+            entries = list(out.iterdir())
+        except OSError as error:
+            raise CLIError(f"{out}: cannot be read: {one_line(error.strerror or error)}") from None
+        if entries:
+            foreign = _foreign_files(out)
+            if foreign:
+                shown = ", ".join(foreign[:3]) + (", ..." if len(foreign) > 3 else "")
+                raise CLIError(
+                    f"{out}: is a folder holding files that mmreg did not write ({shown}); "
+                    f"it is left as it is: choose another {option}"
+                )
+            if not overwrite:
+                raise CLIError(
+                    f"{out}: a result already exists there; pass --overwrite to replace it, "
+                    f"or choose another {option}"
+                )
+    ancestor = _nearest_existing(Path(os.path.abspath(out)).parent)
+    if not ancestor.is_dir():
+        raise CLIError(f"{out}: cannot be written: {ancestor} is not a folder")
+    try:  # what the staging folder will need (os.access is blind to read-only mounts)
+        with _no_interrupts():
+            os.rmdir(tempfile.mkdtemp(prefix=".mmreg-check.", dir=ancestor))
+    except OSError as error:
+        reason = one_line(error.strerror or error).lower()
+        raise CLIError(f"{out}: cannot be written: folder {ancestor}: {reason}") from None
+    return out
+
+
+def remove_partial():
+    """Remove this process's staging folders (after an interrupt or a failure)."""
+    for path in list(_PARTIAL):
+        shutil.rmtree(path, ignore_errors=True)
+        _PARTIAL.discard(path)
+
+
+@contextlib.contextmanager
+def _no_interrupts():
+    """Hold SIGINT back (POSIX) while the block runs; it is delivered afterwards."""
+    block = getattr(signal, "pthread_sigmask", None)
+    if block is None:
+        yield
+        return
+    previous = block(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        block(signal.SIG_SETMASK, previous)
+
+
+def _exchange(first, second):
+    """Swap two paths in one atomic step (Linux ``renameat2``); False where unsupported."""
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p]
+    renameat2.argtypes += [ctypes.c_uint]
+    at_cwd, rename_exchange = -100, 2
+    if renameat2(at_cwd, os.fsencode(first), at_cwd, os.fsencode(second), rename_exchange) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP):
+        return False  # e.g. a file system without RENAME_EXCHANGE
+    raise OSError(code, os.strerror(code), str(second))
+
+
+def _put_in_place(staging, out):
+    """Move the finished ``staging`` folder to ``out`` in one rename.
+
+    A new ``out`` or an empty folder is replaced by ``rename``; an earlier result is
+    swapped with the staging folder in one atomic exchange where the system allows
+    (Linux), else moved aside, replaced and removed (restored if the replacement fails).
+    Returns the path of what is left to remove, or None.
+    """
+    try:
+        os.rename(staging, out)  # new, or an empty folder: one atomic rename
+        return None
+    except OSError as error:
+        if error.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+            raise
+    if _exchange(staging, out):
+        return staging  # now holding the earlier result
+    aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+    _PARTIAL.add(aside)
+    os.rename(out, aside / "result")
+    try:
+        os.rename(staging, out)
+    except OSError:
+        os.rename(aside / "result", out)
+        raise
+    return aside
+
+
+def write_result_dir(
+    out,
+    X,
+    labels,
+    rotations,
+    translations,
+    sigmas,
+    summary,
+    png,
+    run,
+    extra_files=None,
+    *,
+    overwrite=False,
+):
+    """Write a result directory whole: into a staging folder, then put in place at once.
+
+    ``out`` is checked again (:func:`check_out`), so a folder the user filled during the
+    run is not replaced either. ``extra_files`` maps more file names to their bytes.
+    Errors name ``out``, never the staging folder.
     """
     from mmreg import io as mmio
     from mmreg.plotting import cluster_colors
 
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"{out}: exists and is not a directory")
-    parent = out.resolve().parent
+    out = check_out(out, overwrite=overwrite)
+    staging = None
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
-    except OSError as error:
-        raise error_about(out, error) from error
-    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with _no_interrupts():
+            staging = tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent)
+            staging = Path(staging)
+            _PARTIAL.add(staging)
         mmio.write_labels(staging / "labels.npy", labels)
         mmio.write_motions(
             staging / "motions.json",
@@ -376,8 +567,7 @@ def write_result_dir(
         (staging / "result.png").write_bytes(png)
         np.save(staging / "X.npy", X)
         (staging / "run.json").write_text(json.dumps(run, indent=2, default=_json_default) + "\n")
-        extra_files = dict(extra_files or {})
-        for name, content in extra_files.items():
+        for name, content in dict(extra_files or {}).items():
             (staging / name).write_bytes(content)
         # mkdtemp and mkstemp (atomic writes) create private files; give the usual modes.
         umask = os.umask(0)
@@ -385,15 +575,21 @@ def write_result_dir(
         for path in staging.iterdir():
             path.chmod(0o666 & ~umask)
         staging.chmod(0o777 & ~umask)
-        if not out.exists():
-            os.replace(staging, out)  # one rename: the directory appears whole
-            return
-        for name in (*RESULT_FILES, *extra_files):
-            os.replace(staging / name, out / name)
+        with _no_interrupts():
+            leftover = _put_in_place(staging, out)
+            _PARTIAL.discard(staging)
+            if leftover is not None:
+                _PARTIAL.add(leftover)
+        if leftover is not None:
+            shutil.rmtree(leftover, ignore_errors=True)
+            _PARTIAL.discard(leftover)
     except OSError as error:
-        raise error_about(out, error) from error
+        reason = one_line(error.strerror or error).lower()
+        raise CLIError(f"{out}: cannot write the result: {reason}") from error
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        if staging is not None and staging in _PARTIAL:
+            shutil.rmtree(staging, ignore_errors=True)
+            _PARTIAL.discard(staging)
 
 
 def _json_default(value):

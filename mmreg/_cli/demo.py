@@ -5,8 +5,8 @@ import time
 
 import numpy as np
 
-from mmreg._cli._common import Steps, format_table
-from mmreg._cli.register import register
+from mmreg._cli._common import Steps, check_out, format_table
+from mmreg._cli.register import _seed, register
 
 NAME = "demo"
 HELP = "register a generated KITTI-like street scene and report what was found"
@@ -34,7 +34,12 @@ def add_arguments(parser):
     parser.add_argument(
         "--out", metavar="DIR", default=None, help="write the result directory here"
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the scene")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier result directory at --out (never a folder of other files)",
+    )
+    parser.add_argument("--seed", type=_seed, default=0, help="seed of the scene")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no report")
     parser.add_argument(
         "--verbose", "-v", action="count", default=0, help="print the EM's iterations"
@@ -66,8 +71,10 @@ def run(args):
     from mmreg.init import PrecomputedMasks
     from mmreg.metrics import iou_score, objects_found
 
+    if args.out is not None:
+        check_out(args.out, overwrite=args.overwrite)  # before any work
     start = time.perf_counter()
-    with Steps(5 if args.out else 4, quiet=args.quiet) as steps:
+    with Steps(5 if args.out else 4, quiet=args.quiet, verbose=args.verbose) as steps:
         with steps.step("generating the street scene"):
             scene = make_street(n_cars=7, n_moving=3, random_state=args.seed)
         truth = np.where(scene.outlier_mask, -1, scene.labels)
@@ -80,6 +87,7 @@ def run(args):
             seed=0,
             verbose=args.verbose,
             out=args.out,
+            overwrite=args.overwrite,
             view="street",
             init="SAM-like masks",
         )

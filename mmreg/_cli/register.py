@@ -1,6 +1,8 @@
 """``mmreg register``: find the moving objects in a file of correspondences."""
 
 import argparse
+import hashlib
+import math
 import time
 from pathlib import Path
 
@@ -11,6 +13,7 @@ from mmreg._cli._common import (
     Steps,
     check_correspondences,
     check_labels,
+    check_out,
     format_table,
     plural,
     reading,
@@ -47,10 +50,17 @@ rotation_angle_deg, sigma, size, moving), summary.csv (one row per cluster), clu
 (a-points coloured by cluster, outliers grey), result.png, X.npy (the correspondences) and
 run.json (input, options, timings). The directory is written whole or not at all.
 
+--out must be new, an empty folder, or (with --overwrite) an earlier result, which is
+then replaced as a whole; a folder holding other files is never touched. This is checked
+before any work. The default --out is INPUT's name + '-mmreg-' + 8 hex digits of the
+input's full path, so different inputs never share it.
+
 The largest cluster is taken for the background (the static world when the camera moves);
-a cluster is "moving" when the background's motion would carry its a-points, on average,
-more than 3 times its RMS residual away from where its own motion takes them
-(summary.csv: displacement_vs_background, rms_residual).
+a cluster is "moving" when the background's motion would carry its a-points (the median
+over them) more than 3 times the RMS residual of its inliers away from where its own
+motion takes them (summary.csv: displacement_vs_background, residual_scale). Its inliers
+are its correspondences within 3 robust standard deviations (from the median absolute
+deviation) of its median residual, so wrong correspondences do not hide a moving object.
 """
 EPILOG = """\
 examples:
@@ -60,17 +70,44 @@ examples:
 """
 
 
+def _positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number; got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a finite positive number; got {text!r}")
+    return value
+
+
 def _tau(text):
     if text.lower() == "none":
         return None
     try:
-        value = float(text)
-    except ValueError:
+        return _positive_float(text)
+    except argparse.ArgumentTypeError:
         raise argparse.ArgumentTypeError(
-            f"expected a positive number or 'none'; got {text!r}"
+            f"expected a finite positive number or 'none'; got {text!r}"
         ) from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be positive; got {text!r}")
+
+
+def _seed(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer; got {text!r}") from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"must lie in [0, 2**32 - 1]; got {value}")
+    return value
+
+
+def _n_jobs(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer; got {text!r}") from None
+    if value == 0:
+        raise argparse.ArgumentTypeError("must be a positive count, or -1 for every core; got 0")
     return value
 
 
@@ -118,6 +155,13 @@ def add_arguments(parser):
         help="number of initial clusters of --init euclidean",
     )
     parser.add_argument(
+        "--eps",
+        type=_positive_float,
+        default=None,
+        help="neighbourhood radius of --init dbscan, in the units of the points (default: "
+        "4 times the median distance between nearest a-points)",
+    )
+    parser.add_argument(
         "--tau",
         type=_tau,
         default=1.5,
@@ -132,12 +176,24 @@ def add_arguments(parser):
         action="store_true",
         help="the paper's Algorithm 1 exactly (variant='paper') instead of the robust variant",
     )
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument("--seed", type=_seed, default=0, help="random seed")
+    parser.add_argument(
+        "--n-jobs",
+        type=_n_jobs,
+        default=1,
+        help="threads for the initial clustering and the estimator (-1: every core)",
+    )
     parser.add_argument(
         "--out",
         metavar="DIR",
         default=None,
-        help="result directory (default: INPUT's name + '-mmreg', in the current directory)",
+        help="result directory (default: INPUT's name + '-mmreg-' + 8 hex digits of its "
+        "path, in the current directory)",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier result directory at --out (never a folder of other files)",
     )
     parser.add_argument(
         "--view",
@@ -210,10 +266,11 @@ def make_init(args, n):
     from mmreg import io as mmio
     from mmreg.init import DBSCANClustering, EuclideanClustering
 
+    n_jobs = getattr(args, "n_jobs", None)
     if args.init == "euclidean":
-        return EuclideanClustering(n_clusters=args.clusters)
+        return EuclideanClustering(n_clusters=args.clusters, n_jobs=n_jobs)
     if args.init == "dbscan":
-        return DBSCANClustering()
+        return DBSCANClustering(eps=getattr(args, "eps", None), n_jobs=n_jobs)
     path = Path(args.init)
     if path.suffix.lower() == ".npz":
         return read_masks(path, n)
@@ -239,6 +296,9 @@ def _fit(X, init, args, steps):
         random_state=args.seed,
         verbose=args.verbose,
     )
+    n_jobs = getattr(args, "n_jobs", None)
+    if n_jobs is not None and "n_jobs" in estimator.get_params():
+        estimator.set_params(n_jobs=n_jobs)
     with steps.step("EM"), reported_warnings():
         estimator.fit(X)
     return estimator, int(labels.max(initial=-1)) + 1
@@ -291,6 +351,7 @@ def register(
             "init": str(args.init),
             "initial_clusters": n_initial,
             "estimator": estimator.get_params(deep=False) | {"init": str(args.init)},
+            "n_jobs": getattr(args, "n_jobs", None),
             "n_correspondences": len(X),
             "n_clusters": estimator.n_clusters_,
             "n_moving": n_moving,
@@ -313,6 +374,7 @@ def register(
                 png,
                 run,
                 extra_files,
+                overwrite=getattr(args, "overwrite", False),
             )
     return estimator, summary, elapsed, n_initial
 
@@ -323,16 +385,25 @@ TABLE = [
     ("size", "points", ",d"),
     ("rotation_angle_deg", "rotation [deg]", ".3f"),
     ("translation_norm", "translation", ".3f"),
-    ("rms_residual", "RMS residual", ".3g"),
+    ("residual_scale", "residual", ".3g"),
     ("displacement_vs_background", "vs background", ".3f"),
     ("moving", "moving", ""),
 ]
 
 
+def default_out(args):
+    """``<INPUT's name>-mmreg-<8 hex digits>``: a name no other input (or partner) shares."""
+    paths = [args.input, getattr(args, "target", None), getattr(args, "flow", None)]
+    key = "\0".join(str(Path(p).resolve()) for p in paths if p is not None)
+    digest = hashlib.sha256(key.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+    return f"{Path(args.input).stem}-mmreg-{digest}"
+
+
 def run(args):
     if args.out is None:
-        args.out = f"{Path(args.input).stem}-mmreg"
-    with Steps(5, quiet=args.quiet) as steps:
+        args.out = default_out(args)
+    check_out(args.out, overwrite=args.overwrite)  # before any work
+    with Steps(5, quiet=args.quiet, verbose=args.verbose) as steps:
         with steps.step(f"reading {args.input}"):
             X = read_input(args)
             init = make_init(args, len(X))

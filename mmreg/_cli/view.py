@@ -1,5 +1,6 @@
 """``mmreg view``: redraw the picture of a result directory."""
 
+import argparse
 import json
 from pathlib import Path
 
@@ -9,9 +10,10 @@ from mmreg._cli._common import (
     CLIError,
     check_correspondences,
     check_labels,
+    picture_format,
     plural,
     reading,
-    render_png,
+    render_picture,
     result_figure,
 )
 from mmreg._cli.register import VIEWS
@@ -22,17 +24,32 @@ DESCRIPTION = """\
 Redraw the picture of a result directory (of "mmreg register" or "mmreg demo --out") from
 its X.npy, labels.npy and motions.json: the a-points coloured by cluster (the largest, the
 background, in sand; outliers small and grey) and an arrow per cluster for its motion.
-Written to --out, by default RESULT_DIR/result.png (replacing it).
+Written to --out, by default RESULT_DIR/result.png (replacing it); the format follows the
+extension of --out (.png, .pdf, .svg, .eps, .jpg, ...). An existing --out other than
+RESULT_DIR/result.png is replaced only with --overwrite.
 """
+
+
+def _dpi(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer; got {text!r}") from None
+    if not 10 <= value <= 1200:
+        raise argparse.ArgumentTypeError(f"must lie in [10, 1200] dots per inch; got {value}")
+    return value
 
 
 def add_arguments(parser):
     parser.add_argument("result_dir", metavar="RESULT_DIR", help="a result directory")
     parser.add_argument(
         "--out",
-        metavar="PNG",
+        metavar="PICTURE",
         default=None,
-        help="picture to write (default: RESULT_DIR/result.png)",
+        help="picture to write, its format by its extension (default: RESULT_DIR/result.png)",
+    )
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace an existing --out picture"
     )
     parser.add_argument(
         "--view",
@@ -42,7 +59,7 @@ def add_arguments(parser):
         "when every a-point has z > 0, else 3d",
     )
     parser.add_argument("--title", default=None, help="title of the picture")
-    parser.add_argument("--dpi", type=int, default=110, help="resolution of the PNG")
+    parser.add_argument("--dpi", type=_dpi, default=110, help="resolution, dots per inch")
 
 
 def run(args):
@@ -51,6 +68,14 @@ def run(args):
     folder = Path(args.result_dir)
     if not folder.is_dir():
         raise CLIError(f"{folder}: not a result directory (no such directory)")
+    out = Path(args.out) if args.out is not None else folder / "result.png"
+    fmt = picture_format(out)  # before any work
+    if args.out is not None and not args.overwrite and out.exists():
+        same = out.resolve() == (folder / "result.png").resolve()
+        if not same:
+            raise CLIError(f"{out}: exists; pass --overwrite to replace it")
+    if out.is_dir():
+        raise CLIError(f"{out}: is a folder; --out names the picture file")
     paths = {name: folder / name for name in ("X.npy", "labels.npy", "motions.json")}
     for path in paths.values():
         if not path.exists():
@@ -86,9 +111,8 @@ def run(args):
         title=title,
         camera=camera,
     )
-    out = Path(args.out) if args.out is not None else folder / "result.png"
-    png = render_png(fig, dpi=args.dpi)
+    picture = render_picture(fig, fmt, dpi=args.dpi)
     with reading(out), mmio.atomic_write(out) as handle:
-        handle.write(png)
+        handle.write(picture)
     print(f"written: {out}")
     return 0

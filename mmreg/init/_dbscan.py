@@ -1,6 +1,7 @@
 """DBSCAN on the a-points, by scikit-learn or Open3D, with one rule for border points."""
 
 import importlib.util
+import warnings
 from numbers import Integral, Real
 
 import numpy as np
@@ -11,7 +12,42 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 
-__all__ = ["DBSCANClustering"]
+__all__ = ["AllOutliersWarning", "DBSCANClustering", "default_eps"]
+
+# eps=None: this many times the median distance from an a-point to its nearest neighbour.
+EPS_SPACING_FACTOR = 4.0
+# The median is estimated on at most this many a-points (evenly strided).
+_SPACING_SAMPLE = 20_000
+
+
+def default_eps(points, factor=EPS_SPACING_FACTOR):
+    """``factor`` times the median nearest-neighbour distance of ``points`` (the spacing).
+
+    Duplicate points (distance 0) are left out of the median; ``1.0`` when every point
+    is the same. The median is taken over at most 20,000 evenly strided points, each
+    against all the others.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.init._dbscan import default_eps
+    >>> grid = np.stack(np.meshgrid(np.arange(10.0), np.arange(10.0), [0.0]), -1).reshape(-1, 3)
+    >>> round(default_eps(0.2 * grid), 6)  # 4 times the spacing, 0.2
+    0.8
+    """
+    points = np.asarray(points, dtype=float)
+    if len(points) < 2:
+        return 1.0
+    step = max(1, len(points) // _SPACING_SAMPLE)
+    dist, _ = cKDTree(points).query(points[::step], k=2)
+    spacing = dist[:, 1][dist[:, 1] > 0]
+    if not len(spacing):
+        return 1.0
+    return factor * float(np.median(spacing))
+
+
+class AllOutliersWarning(UserWarning):
+    """DBSCAN found no cluster: every a-point is noise (``eps`` too small for the data)."""
 
 
 def _open3d_available():
@@ -52,10 +88,18 @@ class DBSCANClustering(PartitionInitializer):
 
     Parameters
     ----------
-    eps : float, default=0.05
-        Neighbourhood radius, in the units of the points (0.05: 5 cm for point clouds in
-        metres). Clusters are ``eps``-connected, so ``eps < tau`` keeps them within
-        Definition 2 of the paper.
+    eps : float or None, default=None
+        Neighbourhood radius, in the units of the points (e.g. 0.05: 5 cm for point
+        clouds in metres). None adapts it to the data: 4 times the median distance from
+        an a-point to its nearest neighbour (:func:`default_eps`), so the same default
+        suits data in millimetres and in kilometres, dense and sparse (the fixed 0.05 of
+        earlier versions put every point of a scene in millimetres into noise). On the
+        generated scenes 4 times gave over-segmentations from which the registration
+        recovered the objects best (3 times left many points as noise, FlyingThings3D-like
+        IoU 0.78-0.79 against 0.92). Clusters are
+        ``eps``-connected, so ``eps < tau`` keeps them within Definition 2 of the paper.
+        When no cluster is found (every point noise), an :class:`AllOutliersWarning` says
+        so and names the ``eps`` used.
     min_samples : int, default=5
         Points within ``eps`` (the point itself included) that make a core point.
     backend : {"auto", "open3d", "sklearn"}, default="auto"
@@ -71,6 +115,8 @@ class DBSCANClustering(PartitionInitializer):
 
     Attributes
     ----------
+    eps_ : float
+        The neighbourhood radius used: ``eps``, or the one chosen from the data.
     labels_ : ndarray of shape (n_samples,)
         Cluster of each correspondence in ``0..n_clusters_-1``, numbered in order of their
         first correspondence (whatever the backend); ``-1`` for noise.
@@ -123,13 +169,13 @@ class DBSCANClustering(PartitionInitializer):
     """
 
     _parameter_constraints: dict = {
-        "eps": [Interval(Real, 0, None, closed="neither")],
+        "eps": [Interval(Real, 0, None, closed="neither"), None],
         "min_samples": [Interval(Integral, 1, None, closed="left")],
         "backend": [StrOptions({"auto", "open3d", "sklearn"})],
         "n_jobs": [Integral, None],
     }
 
-    def __init__(self, eps=0.05, *, min_samples=5, backend="auto", n_jobs=None):
+    def __init__(self, eps=None, *, min_samples=5, backend="auto", n_jobs=None):
         self.eps = eps
         self.min_samples = min_samples
         self.backend = backend
@@ -167,10 +213,13 @@ class DBSCANClustering(PartitionInitializer):
         """
         points = self._validate_points(X, reset=True)
         self.backend_ = self._resolve_backend(points.shape[1])
+        self.eps_ = float(self.eps) if self.eps is not None else default_eps(points)
+        if not np.isfinite(self.eps_) or self.eps_ <= 0:  # e.g. an overflowing spacing
+            raise ValueError(f"eps must be a finite positive number; got {self.eps_}.")
         if self.backend_ == "open3d":
-            labels, core = _open3d_dbscan(points, self.eps, self.min_samples)
+            labels, core = _open3d_dbscan(points, self.eps_, self.min_samples)
         else:
-            labels, core = _sklearn_dbscan(points, self.eps, self.min_samples, self.n_jobs)
+            labels, core = _sklearn_dbscan(points, self.eps_, self.min_samples, self.n_jobs)
         # Every point the backend clustered is a core point or within eps of one.
         core &= labels >= 0
         self.core_sample_indices_ = np.flatnonzero(core)
@@ -182,6 +231,14 @@ class DBSCANClustering(PartitionInitializer):
             labels[border] = self._core_labels[nearest]
         self.labels_, self.n_clusters_ = number_by_first_point(labels)
         self._core_labels = self.labels_[core]
+        if self.n_clusters_ == 0:
+            warnings.warn(
+                f"DBSCAN found no cluster: all {len(points):,} a-points are noise with "
+                f"eps={self.eps_:.4g} and min_samples={self.min_samples} (the median spacing "
+                f"of the points is {default_eps(points, 1.0):.4g}); raise eps.",
+                AllOutliersWarning,
+                stacklevel=3,  # the caller of fit (sklearn's _fit_context wraps it)
+            )
         return self
 
     def _assign(self, points):
@@ -189,7 +246,7 @@ class DBSCANClustering(PartitionInitializer):
         if not len(self._core_points):
             return out
         tree = cKDTree(self._core_points)
-        dist, idx = tree.query(points, k=1, distance_upper_bound=np.nextafter(self.eps, np.inf))
+        dist, idx = tree.query(points, k=1, distance_upper_bound=np.nextafter(self.eps_, np.inf))
         near = np.isfinite(dist)
         out[near] = self._core_labels[idx[near]]
         return out
