@@ -176,13 +176,27 @@ def _name(label, size, background_label, label_names, kind):
     return f"{kind} {label} ({size:,} pts)"
 
 
+def _legend_rows(ax, fontsize, ncol=1):
+    """How many legend rows fit in the height of ``ax`` (at least 3)."""
+    fig = ax.get_figure()
+    height = ax.get_position().height * fig.get_figheight() * 72.0  # points
+    row = fontsize * 1.55  # a marker row and matplotlib's label spacing
+    return max(3, int((height - 2 * fontsize) // row)) * max(1, ncol)
+
+
 def _legend(ax, labels, table, background_label, label_names, *, kind="cluster", extra=(), **kw):
+    """A legend of the largest clusters that fits the axes; the rest as "and N more"."""
     from matplotlib.lines import Line2D
 
+    fontsize = 7
     ids, sizes = _ranked(labels)
     entries = list(zip(ids.tolist(), sizes.tolist(), strict=True))
-    shown, rest = entries[:_LEGEND_ENTRIES], entries[_LEGEND_ENTRIES:]
     n_out = int(np.sum(labels < 0))
+    room = min(_LEGEND_ENTRIES, _legend_rows(ax, fontsize, kw.get("ncol", 1)))
+    room -= len(extra) + (1 if n_out else 0)
+    if len(entries) > room:  # one row for "and N more"
+        room = max(room - 1, 1)
+    shown, rest = entries[:room], entries[room:]
     if n_out:
         shown.append((-1, n_out))
     handles = [
@@ -203,11 +217,11 @@ def _legend(ax, labels, table, background_label, label_names, *, kind="cluster",
                 [],
                 [],
                 linestyle="none",
-                label=f"+ {len(rest)} smaller clusters ({sum(s for _, s in rest):,} pts)",
+                label=f"and {len(rest)} more {kind}s ({sum(s for _, s in rest):,} pts)",
             )
         )
     handles.extend(extra)
-    return ax.legend(handles=handles, fontsize=7, framealpha=0.85, **kw)
+    return ax.legend(handles=handles, fontsize=fontsize, framealpha=0.85, **kw)
 
 
 def _subsample(labels, background_label, max_points, random_state):
@@ -289,7 +303,8 @@ def _new_axes(ax, view):
         return ax
     import matplotlib.pyplot as plt
 
-    fig = plt.figure(figsize=(7, 6))
+    # Constrained layout keeps a legend beside a flat view inside the figure.
+    fig = plt.figure(figsize=(7, 6), layout="constrained")
     return fig.add_subplot(projection="3d" if view == "3d" else None)
 
 
@@ -350,8 +365,10 @@ def plot_clusters(
     units : str, default="m"
         Unit of the coordinates, for the axis labels.
     legend : bool, default=True
-        Whether to draw a legend: to the right of a flat view, in the upper left corner
-        of a 3-D one.
+        Whether to draw a legend: to the right of a flat view when the figure has a
+        layout engine (the figures made here do), else in the upper left corner of the
+        axes. It lists the largest clusters that fit the axes' height and sums up the
+        rest as "and N more clusters".
     point_size : float, default=None
         Marker area in points^2; None: from the number of points.
     max_points : int or None, default=60000
@@ -412,6 +429,9 @@ def plot_clusters(
     if view == "3d":
         order = np.argsort(rank, kind="stable")
         pts = a[keep][order]
+        # Draw in the order given (points, then arrows on top), not by depth, which
+        # put whole point clouds over the arrows.
+        ax.computed_zorder = False
         ax.scatter(
             pts[:, 0],
             pts[:, 1],
@@ -420,11 +440,11 @@ def plot_clusters(
             s=sizes[order],
             linewidths=0,
             depthshade=False,
+            zorder=1,
         )
         ax.set_xlabel(f"x [{units}]")
         ax.set_ylabel(f"y [{units}]")
         ax.set_zlabel(f"z [{units}]")
-        ax.set_box_aspect(np.ptp(a, axis=0) + 1e-9 * np.ptp(a).clip(min=1.0))
         if b is not None:
             b = _check_points(b, "b")
             pts = b[keep][order]
@@ -437,6 +457,7 @@ def plot_clusters(
                 alpha=0.25,
                 linewidths=0,
                 depthshade=False,
+                zorder=0,
             )
     else:
         xy, visible, (xlabel, ylabel) = _project(a, view, camera, units)
@@ -474,8 +495,12 @@ def plot_clusters(
         extra.append(
             Line2D([], [], linestyle="none", marker="o", color="0.6", alpha=0.4, label="b-points")
         )
+    heads = None
     if motions is not None:
-        extra.append(_draw_arrows(ax, a, labels, motions, ids, relative_to, view, camera, units))
+        arrow, heads = _draw_arrows(ax, a, labels, motions, ids, relative_to, view, camera, units)
+        extra.append(arrow)
+    if view == "3d":
+        _frame_3d(ax, a if heads is None else np.vstack([a, heads]))
     if legend:
         _legend(
             ax,
@@ -486,21 +511,55 @@ def plot_clusters(
             kind=kind,
             extra=[e for e in extra if e],
             # Beside a flat view; inside a 3-D one (layout engines leave it out there).
-            loc="upper left",
-            bbox_to_anchor=(1.02, 1.0) if view != "3d" else (0.0, 1.0),
-            borderaxespad=0.0,
+            **_legend_place(ax, view),
         )
     if title is not None:
         ax.set_title(title, fontsize=10)
     return ax
 
 
+def _legend_place(ax, view):
+    """Beside a flat view when a layout engine makes room for it, else inside the axes."""
+    fig = ax.get_figure()
+    has_layout = fig is not None and fig.get_layout_engine() is not None
+    if view != "3d" and has_layout:
+        return {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0), "borderaxespad": 0.0}
+    # Layout engines leave a 3-D axes' legend out: inside its (usually empty) corner.
+    return {"loc": "upper left", "bbox_to_anchor": (0.0, 1.0), "borderaxespad": 0.0}
+
+
+def _frame_3d(ax, points):
+    """Limits holding ``points`` (and the arrows' heads), readable axes and ticks.
+
+    An axis along which the points hardly extend (a flat scene) keeps at least a fifth
+    of the largest extent, so its tick labels do not pile up; each axis has at most five
+    ticks.
+    """
+    from matplotlib.ticker import MaxNLocator
+
+    low, high = points.min(axis=0), points.max(axis=0)
+    extent = high - low
+    largest = float(extent.max()) if np.isfinite(extent).all() and extent.max() > 0 else 1.0
+    extent = np.maximum(extent, 0.2 * largest)
+    center = (low + high) / 2
+    ax.set_xlim(center[0] - extent[0] / 2, center[0] + extent[0] / 2)
+    ax.set_ylim(center[1] - extent[1] / 2, center[1] + extent[1] / 2)
+    ax.set_zlim(center[2] - extent[2] / 2, center[2] + extent[2] / 2)
+    ax.set_box_aspect(extent)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(MaxNLocator(nbins=5, min_n_ticks=2))
+    ax.tick_params(labelsize=8)
+    ax.zaxis.labelpad = 6
+
+
 def _draw_arrows(ax, a, labels, motions, ids, relative_to, view, camera, units):
-    """Arrows from each cluster's centroid to where its motion takes it; None if none shows.
+    """Arrows from each cluster's centroid to where its motion takes it, over the points.
 
     Arrows shorter than 1 % of the extent of the drawing are left out (a static cluster
-    relative to the background, say).
+    relative to the background, say). Returns the legend handle (None if no arrow shows)
+    and, in 3-D, the arrows' heads (to frame the drawing; None otherwise).
     """
+    from matplotlib import patheffects
     from matplotlib.lines import Line2D
 
     starts, ends, kept = _arrow_ends(a, labels, motions, ids.tolist(), relative_to)
@@ -516,10 +575,20 @@ def _draw_arrows(ax, a, labels, motions, ids, relative_to, view, camera, units):
     long_enough = np.linalg.norm(q - p, axis=1) > 0.01 * extent
     p, q = p[long_enough], q[long_enough]
     if not len(p):
-        return None
+        return None, None
+    # A white halo keeps a black arrow visible over dark clusters.
+    halo = [patheffects.withStroke(linewidth=3.0, foreground="white")]
     if view == "3d":
         d = q - p
-        ax.quiver(*p.T, *d.T, color="black", linewidth=1.0, arrow_length_ratio=0.15)
+        ax.quiver(
+            *p.T,
+            *d.T,
+            color="black",
+            linewidth=1.4,
+            arrow_length_ratio=0.2,
+            zorder=10,
+            path_effects=halo,
+        )
     else:
         for s, e in zip(p, q, strict=True):
             ax.annotate(
@@ -533,10 +602,13 @@ def _draw_arrows(ax, a, labels, motions, ids, relative_to, view, camera, units):
                     "mutation_scale": 9,
                     "shrinkA": 0,
                     "shrinkB": 0,
+                    "path_effects": halo,
                 },
+                zorder=10,
             )
     what = "motion relative to the background" if relative_to is not None else "motion"
-    return Line2D([], [], color="black", marker=">", label=f"arrow: {what}")
+    handle = Line2D([], [], color="black", marker=">", label=f"arrow: {what}")
+    return handle, (q if view == "3d" else None)
 
 
 def _new_figure(fig, figsize):

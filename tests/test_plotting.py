@@ -177,3 +177,81 @@ def test_bad_arguments(scene):
         plot_clusters(
             scene.a, scene.labels, ax=Figure().add_subplot(), view="camera", camera={"fx": 1.0}
         )
+
+
+# --------------------------------------------------------------------------- readability
+def _forty_blocks():
+    rng = np.random.default_rng(0)
+    centers = rng.uniform(-30, 30, (40, 3))
+    a = np.repeat(centers, 30, axis=0) + rng.uniform(-1, 1, (1200, 3))
+    labels = np.repeat(np.arange(40), 30)
+    labels[:60] = 0  # one cluster clearly the largest
+    return a, labels
+
+
+def _extent(artist, fig):
+    return artist.get_window_extent(fig.canvas.get_renderer())
+
+
+def test_3d_arrows_are_drawn_over_the_points(scene):
+    """Depth sorting drew whole point clouds over the arrows: now arrows come last."""
+    fig = Figure()
+    ax = fig.add_subplot(projection="3d")
+    plot_clusters(scene.a, scene.labels, ax=ax, motions=(scene.rotations, scene.translations))
+    assert ax.computed_zorder is False
+    points = [c for c in ax.collections if len(np.atleast_2d(c.get_offsets())) > 1]
+    arrows = [c for c in ax.collections if c not in points]
+    assert arrows and points
+    assert min(c.get_zorder() for c in arrows) > max(c.get_zorder() for c in points)
+
+
+def test_3d_tick_labels_of_a_flat_scene_do_not_overlap():
+    rng = np.random.default_rng(1)
+    a = np.column_stack([rng.uniform(-5, 5, (500, 2)), np.zeros(500)])  # z = 0: flat
+    labels = (a[:, 0] > 2).astype(int)
+    fig = plt.figure(figsize=(10, 7))
+    try:
+        ax = plot_clusters(a, labels, ax=fig.add_subplot(projection="3d"))
+        fig.canvas.draw()
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            boxes = [
+                _extent(t, fig) for t in axis.get_ticklabels() if t.get_visible() and t.get_text()
+            ]
+            assert len(boxes) >= 2
+            for i, first in enumerate(boxes):
+                for second in boxes[i + 1 :]:
+                    assert not first.overlaps(second), [t.get_text() for t in axis.get_ticklabels()]
+    finally:
+        plt.close(fig)
+
+
+@pytest.mark.parametrize("view", ["top", "3d"])
+def test_a_legend_of_forty_clusters_fits_the_figure(view):
+    a, labels = _forty_blocks()
+    ax = plot_clusters(a, labels, view=view)  # a new pyplot figure
+    fig = ax.get_figure()
+    try:
+        fig.canvas.draw()
+        legend = ax.get_legend()
+        texts = [t.get_text() for t in legend.get_texts()]
+        assert texts[-1].startswith("and ") and "more clusters" in texts[-1]
+        shown = len(texts) - 1
+        assert int(texts[-1].split()[1]) == len(np.unique(labels)) - shown
+        box, frame = _extent(legend, fig), fig.bbox
+        assert box.x0 >= frame.x0 and box.x1 <= frame.x1
+        assert box.y0 >= frame.y0 and box.y1 <= frame.y1
+    finally:
+        plt.close(fig)
+
+
+def test_a_legend_in_a_short_axes_lists_what_fits():
+    a, labels = _forty_blocks()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = Figure(figsize=(6, 1.6), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = plot_clusters(a, labels, ax=fig.add_subplot(), view="top")
+    fig.canvas.draw()
+    legend = ax.get_legend()
+    assert _extent(legend, fig).height <= fig.bbox.height
+    assert len(legend.get_texts()) < 12

@@ -26,11 +26,12 @@ import contextlib
 import os
 import signal
 import sys
+import warnings
 from importlib.metadata import entry_points
 from pathlib import Path
 
 from mmreg._cli import demo, evaluate, register, view
-from mmreg._cli._common import CLIError, one_line, remove_partial
+from mmreg._cli._common import STRAY_WARNINGS, CLIError, one_line, remove_partial, show_warning
 
 __all__ = ["BUILTIN_COMMANDS", "ENTRY_POINT_GROUP", "build_parser", "main"]
 
@@ -141,7 +142,12 @@ def main(argv=None):
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
-        return int(args._run(args) or 0)
+        with warnings.catch_warnings():
+            if not args.debug:  # one line per warning; none of numpy's stray notes
+                for category in STRAY_WARNINGS:
+                    warnings.simplefilter("ignore", category)
+                warnings.showwarning = show_warning
+            return int(args._run(args) or 0)
     except CLIError as error:
         if args is not None and args.debug:
             raise

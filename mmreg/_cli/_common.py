@@ -30,15 +30,6 @@ import tempfile
 import warnings
 from pathlib import Path
 
-import numpy as np
-
-from mmreg._motion import (
-    MOVING_FACTOR,  # noqa: F401 - the rule of summary.csv's "moving"
-    motion_statistics,
-    moving_clusters,
-    static_cluster,
-)
-
 RESULT_FILES = (
     "labels.npy",
     "motions.json",
@@ -127,18 +118,39 @@ def warn(message):
     print(f"mmreg: warning: {one_line(message)}", file=sys.stderr)
 
 
+# Warnings that say nothing a user of the command line can act on (numpy's floating
+# point notes, deprecations inside libraries): not shown.
+STRAY_WARNINGS = (
+    RuntimeWarning,
+    DeprecationWarning,
+    PendingDeprecationWarning,
+    FutureWarning,
+    ResourceWarning,
+)
+
+
 @contextlib.contextmanager
 def reported_warnings():
-    """Show Python warnings raised inside as one ``mmreg: warning:`` line each (once)."""
+    """Show Python warnings raised inside as one ``mmreg: warning:`` line each (once).
+
+    :data:`STRAY_WARNINGS` are dropped.
+    """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         yield
     seen = set()
     for item in caught:
+        if issubclass(item.category, STRAY_WARNINGS):
+            continue
         text = one_line(item.message)
         if text not in seen:
             seen.add(text)
             warn(text)
+
+
+def show_warning(message, category, filename, lineno, file=None, line=None):
+    """``warnings.showwarning`` for the command line: one ``mmreg: warning:`` line."""
+    warn(message)
 
 
 class Steps:
@@ -181,6 +193,8 @@ class Steps:
 
 def check_correspondences(X, path):
     """``X`` as a finite float array of shape (n, 6) with n >= 1, or a CLIError on ``path``."""
+    import numpy as np
+
     X = np.asarray(X)
     if X.ndim != 2 or X.shape[1] != 6:
         raise CLIError(
@@ -208,6 +222,8 @@ def check_correspondences(X, path):
 
 def check_labels(labels, n, path, what="labels"):
     """Integer labels, one per correspondence, or a CLIError on ``path``."""
+    import numpy as np
+
     labels = np.asarray(labels)
     if labels.ndim != 1:
         raise CLIError(
@@ -225,6 +241,8 @@ def check_labels(labels, n, path, what="labels"):
 
 def rotation_angle_deg(rotations):
     """Angle of each rotation matrix, in degrees."""
+    import numpy as np
+
     rotations = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
     cosine = (np.trace(rotations, axis1=1, axis2=2) - 1.0) / 2.0
     return np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
@@ -232,6 +250,8 @@ def rotation_angle_deg(rotations):
 
 def background_label(labels):
     """The largest cluster (the static world, when the camera moves), or None."""
+    from mmreg._motion import static_cluster
+
     label = static_cluster(labels)
     return None if label < 0 else label
 
@@ -245,11 +265,15 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     (median + 3 robust standard deviations, so wrong correspondences do not inflate
     it), ``rms_residual`` the plain RMS of ``|R a + t - b|`` over all its
     correspondences. A cluster is ``moving`` when the displacement exceeds
-    :data:`MOVING_FACTOR` (3) times the residual scale (:func:`mmreg._motion.moving_clusters`).
+    :data:`mmreg._motion.MOVING_FACTOR` (3) times the residual scale
+    (:func:`mmreg._motion.moving_clusters`).
 
     Returns a :class:`pandas.DataFrame` (coordinates in the units of the points).
     """
+    import numpy as np
     import pandas as pd
+
+    from mmreg._motion import motion_statistics, moving_clusters, static_cluster
 
     a, b = X[:, :3], X[:, 3:]
     rotations = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
@@ -358,14 +382,15 @@ def result_figure(X, labels, motions, *, moving=None, view="auto", title=None, c
     ``moving`` (one bool per cluster) names the clusters "moving" or "static" in the
     legend; the largest is "background".
     """
+    import numpy as np
     from matplotlib.figure import Figure
 
     from mmreg.plotting import plot_clusters, plot_street
 
     a = X[:, :3]
     names = None
+    reference = background_label(labels)
     if moving is not None:
-        reference = background_label(labels)
         names = {
             j: f"cluster {j}: " + ("background" if j == reference else "moving" if m else "static")
             for j, m in enumerate(np.asarray(moving, dtype=bool).tolist())
@@ -380,13 +405,15 @@ def result_figure(X, labels, motions, *, moving=None, view="auto", title=None, c
         return fig
     fig = Figure(figsize=(10, 7), layout="constrained")
     ax = fig.add_subplot(projection="3d" if view == "3d" else None)
-    # The largest cluster is the reference of "moving": drawn as the background.
+    # The largest cluster is the reference of "moving": drawn as the background, and the
+    # arrows show the motions relative to it (none for a cluster moving with it).
     plot_clusters(
         a,
         labels,
         ax=ax,
         view=view,
         motions=motions,
+        relative_to=reference,
         camera=camera,
         label_names=names,
         background=True,
@@ -541,6 +568,8 @@ def write_result_dir(
     run is not replaced either. ``extra_files`` maps more file names to their bytes.
     Errors name ``out``, never the staging folder.
     """
+    import numpy as np
+
     from mmreg import io as mmio
     from mmreg.plotting import cluster_colors
 
@@ -593,6 +622,8 @@ def write_result_dir(
 
 
 def _json_default(value):
+    import numpy as np
+
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):

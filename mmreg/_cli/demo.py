@@ -3,8 +3,6 @@
 import io
 import time
 
-import numpy as np
-
 from mmreg._cli._common import Steps, check_out, format_table
 from mmreg._cli.register import _seed, register
 
@@ -54,6 +52,8 @@ def _truth_names(scene):
 
 def _best_matches(truth, labels, n_clusters):
     """Per estimated cluster: the true object it shares most points with, and their IoU."""
+    import numpy as np
+
     matches = []
     for label in range(n_clusters):
         members = labels == label
@@ -66,6 +66,8 @@ def _best_matches(truth, labels, n_clusters):
 
 def run(args):
     import argparse
+
+    import numpy as np
 
     from mmreg.datasets import make_street
     from mmreg.init import PrecomputedMasks

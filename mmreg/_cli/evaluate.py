@@ -5,8 +5,6 @@ import math
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from mmreg._cli._common import CLIError, check_correspondences, check_labels, reading
 
 NAME = "evaluate"
@@ -37,6 +35,8 @@ def add_arguments(parser):
 
 
 def _read_truth(path, n):
+    import numpy as np
+
     from mmreg import io as mmio
 
     path = Path(path)
@@ -81,6 +81,8 @@ def _read_truth(path, n):
 
 
 def _read_prediction(pred_dir):
+    import numpy as np
+
     from mmreg import io as mmio
 
     pred_dir = Path(pred_dir)
@@ -107,6 +109,8 @@ def _read_prediction(pred_dir):
 
 def evaluate(pred_dir, truth_path):
     """The measures as an ordered dict ``name -> value`` (NaN when not computable)."""
+    import numpy as np
+
     from mmreg.metrics import (
         adjusted_rand_score,
         ground_truth_poses,

@@ -6,8 +6,6 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
-
 from mmreg._cli._common import (
     CLIError,
     Steps,
@@ -238,6 +236,8 @@ def read_input(args):
 
 def read_masks(path, n):
     """PrecomputedMasks from an .npz holding ``masks`` and ``pixels``."""
+    import numpy as np
+
     from mmreg.init import PrecomputedMasks
 
     with reading(path):

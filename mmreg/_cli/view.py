@@ -4,8 +4,6 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
 from mmreg._cli._common import (
     CLIError,
     check_correspondences,
@@ -63,6 +61,8 @@ def add_arguments(parser):
 
 
 def run(args):
+    import numpy as np
+
     from mmreg import io as mmio
 
     folder = Path(args.result_dir)
