@@ -62,7 +62,8 @@ Columns (scored points: ground-truth label >= 0):
                       says there is no static cluster: ``static_cluster_ == -1``);
 ``epe_obj_in``/``epe_obj``  EPE of the input / rigid flow on each moving object, the mean
                       over objects in the table, each object's in the CSV (``label:epe``);
-``labelled_-1``       share of all correspondences the method labels -1 (outliers).
+``labelled_-1``       share of all correspondences the method labels -1 (outliers);
+``static_cluster``    the static cluster used (-1: none), ``warnings`` those fit raised.
 """
 
 import argparse
@@ -410,6 +411,7 @@ def score(case, method, est, seconds, caught):
         "static_moving": static_moving,
         "static_moving_share": static_moving_points / max(np.count_nonzero(static_points), 1),
         "moving_from": moving_from,
+        "static_cluster": static,
         "iou": iou_score(t, p),
     }
     if len(case.moving):
@@ -594,6 +596,14 @@ def write_markdown(path, title, table, summary, notes, seeds, argv):
         "every run is in the CSV",
     ]
     lines += [f"- note: {n}" for n in notes]
+    none = table[table["static_cluster"] < 0].groupby("method", sort=False)["scene"].count()
+    if len(none):
+        runs = table["method"].value_counts()
+        lines.append(
+            "- no static cluster (`static_cluster_ == -1`: every cluster then counts as moving "
+            "and every point as dynamic) from "
+            + ", ".join(f"{m} on {k} of {runs[m]} inputs" for m, k in none.items())
+        )
     lines += [
         "- static cluster and moving flags from: "
         + ", ".join(sorted(set(table["moving_from"])))
