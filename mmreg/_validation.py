@@ -36,7 +36,7 @@ def check_coordinate_range(X, *, name="X"):
     >>> check_coordinate_range(np.array([[1.0, 3e150]]))
     Traceback (most recent call last):
     ...
-    ValueError: X holds values up to 3e+150 in magnitude; coordinates must lie within ...
+    ValueError: values of X reach 3e+150 in magnitude; coordinates must lie within ...
     """
     X = np.asarray(X)
     if X.size == 0 or X.dtype.kind not in "iuf":
@@ -44,9 +44,9 @@ def check_coordinate_range(X, *, name="X"):
     largest = max(abs(float(X.max())), abs(float(X.min())))  # NaN: never larger
     if largest > MAX_ABS_COORDINATE:
         raise ValueError(
-            f"{name} holds values up to {float(largest):.3g} in magnitude; coordinates must "
-            f"lie within +-{MAX_ABS_COORDINATE:.0e} so that squared distances do not "
-            "overflow. Rescale the points (e.g. to metres)."
+            f"values of {name} reach {float(largest):.3g} in magnitude; coordinates must lie "
+            f"within +-{MAX_ABS_COORDINATE:.0e} so that squared distances do not overflow. "
+            "Rescale the points (e.g. to metres)."
         )
 
 
