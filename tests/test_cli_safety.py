@@ -405,3 +405,22 @@ def test_help_and_version_import_nothing_heavy():
     new = set(modules.split())
     assert not new & {"open3d", "matplotlib", "pandas", "tqdm", "seaborn", "PIL", "sklearn"}
     assert float(seconds) < 1.0  # on top of "import mmreg" (about 0.05 s when idle)
+
+
+def test_every_file_the_commands_read_is_checked(tmp_path, result, scene, capsys):
+    """Masks, ground truth and a result's X.npy go through the same strict readers."""
+    masks = tmp_path / "masks.npz"
+    np.savez(masks, masks=np.ones((1, 4, 4), bool), pixels=np.zeros((900, 2), int))
+    masks.write_bytes(masks.read_bytes()[:-30])
+    code, _, err = _run("register", tmp_path / "pairs.npy", "--init", masks, capsys=capsys)
+    assert code == 2 and f"{masks}: cannot be read as a .npz file" in err
+    truth = tmp_path / "truth.npz"
+    np.savez(truth, labels=scene.labels)
+    truth.write_bytes(truth.read_bytes() + b"\x00")
+    code, _, err = _run("evaluate", result, truth, capsys=capsys)
+    assert code == 2 and f"{truth}: corrupt .npz file" in err
+    x = result / "X.npy"
+    x.write_bytes(x.read_bytes()[:-8])
+    for command in (["view", result], ["evaluate", result, tmp_path / "init.npy"]):
+        code, _, err = _run(*command, capsys=capsys)
+        assert code == 2 and f"{x}: corrupt .npy file" in err and "(truncated)" in err

@@ -191,6 +191,20 @@ class Steps:
         self.close()
 
 
+def load_npz(path, what=None):
+    """``{name: array}`` of an ``.npz`` file, read strictly (CRC-checked, nothing after its end)."""
+    from mmreg import io as mmio
+
+    return mmio._load_npz(mmio._check_readable(path, what))
+
+
+def load_npy(path, what=None):
+    """The array of a ``.npy`` file, read strictly (its size must match its header)."""
+    from mmreg import io as mmio
+
+    return mmio._load_npy(mmio._check_readable(path, what))
+
+
 def check_correspondences(X, path):
     """``X`` as a finite float array of shape (n, 6) with n >= 1, or a CLIError on ``path``."""
     import numpy as np

@@ -1,11 +1,19 @@
 """``mmreg evaluate``: score a result directory against the ground truth."""
 
+import contextlib
 import json
 import math
 import warnings
 from pathlib import Path
 
-from mmreg._cli._common import CLIError, check_correspondences, check_labels, reading
+from mmreg._cli._common import (
+    CLIError,
+    check_correspondences,
+    check_labels,
+    load_npy,
+    load_npz,
+    reading,
+)
 
 NAME = "evaluate"
 HELP = "score a result directory against ground-truth labels (and motions)"
@@ -43,7 +51,7 @@ def _read_truth(path, n):
     X = rotations = translations = None
     with reading(path):
         if path.suffix.lower() == ".npz":
-            with np.load(path, allow_pickle=False) as data:
+            with contextlib.nullcontext(load_npz(path, "ground truth")) as data:
                 names = list(data.keys())
                 if "labels" not in names:
                     raise CLIError(f"{path}: needs an array 'labels'; it holds {names}")
@@ -101,7 +109,7 @@ def _read_prediction(pred_dir):
             motions = mmio.read_motions(motions_path)
     if X_path.exists():
         with reading(X_path):
-            X = check_correspondences(np.load(X_path, allow_pickle=False), X_path)
+            X = check_correspondences(load_npy(X_path), X_path)
         if len(X) != len(labels):
             raise CLIError(f"{X_path}: {len(X)} correspondences for {len(labels)} labels")
     return labels, motions, X

@@ -1,6 +1,7 @@
 """``mmreg register``: find the moving objects in a file of correspondences."""
 
 import argparse
+import contextlib
 import hashlib
 import math
 import time
@@ -13,6 +14,7 @@ from mmreg._cli._common import (
     check_labels,
     check_out,
     format_table,
+    load_npz,
     plural,
     reading,
     render_png,
@@ -236,12 +238,10 @@ def read_input(args):
 
 def read_masks(path, n):
     """PrecomputedMasks from an .npz holding ``masks`` and ``pixels``."""
-    import numpy as np
-
     from mmreg.init import PrecomputedMasks
 
     with reading(path):
-        with np.load(path, allow_pickle=False) as data:
+        with contextlib.nullcontext(load_npz(path, "masks")) as data:
             names = list(data.keys())
             missing = [k for k in ("masks", "pixels") if k not in names]
             if missing:

@@ -8,6 +8,7 @@ from mmreg._cli._common import (
     CLIError,
     check_correspondences,
     check_labels,
+    load_npy,
     picture_format,
     plural,
     reading,
@@ -81,7 +82,7 @@ def run(args):
         if not path.exists():
             raise CLIError(f"{path}: no such file (is {folder} a result directory?)")
     with reading(paths["X.npy"]):
-        X = check_correspondences(np.load(paths["X.npy"], allow_pickle=False), paths["X.npy"])
+        X = check_correspondences(load_npy(paths["X.npy"]), paths["X.npy"])
     with reading(paths["labels.npy"]):
         labels = check_labels(mmio.read_labels(paths["labels.npy"]), len(X), paths["labels.npy"])
     with reading(paths["motions.json"]):
