@@ -366,6 +366,25 @@ def test_png_reader_refuses_damaged_16_bit_colour(tmp_path):
         read_png(tmp_path / "short.png")
 
 
+def test_png_reader_refuses_damaged_grey_pngs_and_bytes_after_the_end(tmp_path):
+    """Pillow ignored what follows IEND and read some damaged grey PNGs without a word."""
+    grey = (np.arange(40, dtype=np.uint16).reshape(5, 8) * 1500).astype(np.uint16)
+    path = tmp_path / "disparity.png"
+    Image.fromarray(grey).save(path)
+    good = path.read_bytes()
+    (tmp_path / "long.png").write_bytes(good + b"\x00" * 16)
+    with pytest.raises(ValueError, match="long.png.*16 bytes follow the IEND chunk"):
+        read_png(tmp_path / "long.png")
+    data = bytearray(good)
+    data[-20] ^= 0x01  # inside the compressed pixels
+    (tmp_path / "flip.png").write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="flip.png.*corrupt PNG"):
+        read_png(tmp_path / "flip.png")
+    (tmp_path / "cut.png").write_bytes(good[:30])  # inside IHDR
+    with pytest.raises(ValueError, match="cut.png.*corrupt PNG"):
+        read_png(tmp_path / "cut.png")
+
+
 # --------------------------------------------------------------------------- PFM / .flo
 @pytest.mark.parametrize("little_endian", [True, False])
 @pytest.mark.parametrize("shape", [(4, 5), (4, 5, 3)])
