@@ -17,6 +17,15 @@ from mmreg._neighbors import (
 )
 from mmreg.datasets import make_scene
 from mmreg.init import EuclideanClustering, euclidean_clustering
+from mmreg.init._euclidean import (
+    _complete_forest,
+    _components,
+    _GridPyramid,
+    _knn_edges,
+    _nearest_in_other_group,
+    _pyramid_cell,
+    _ZOrder,
+)
 
 
 def reference_labels(points, radius, min_cluster_size):
@@ -245,3 +254,150 @@ def test_shortest_edges_between_components_matches_brute_force(seed, n_component
     np.testing.assert_allclose(
         np.linalg.norm(points[edges[:, 0]] - points[edges[:, 1]], axis=1), lengths
     )
+
+
+def sequential_squared_distances(a, b):
+    """Squared distances summed axis by axis, in order: what a KD-tree query computes."""
+    total = np.zeros(np.broadcast_shapes(a.shape, b.shape)[:-1])
+    for axis in range(a.shape[-1]):
+        total = total + (a[..., axis] - b[..., axis]) ** 2
+    return total
+
+
+def knn_forest(points, n_neighbors):
+    from scipy.spatial import cKDTree
+
+    edges, lengths, reach = _knn_edges(points, cKDTree(points), n_neighbors, 1)
+    forest, forest_lengths = minimum_spanning_forest(len(points), edges, lengths)
+    return forest, forest_lengths, reach
+
+
+def single_linkage_between_trees(points, trees):
+    """Lengths of the minimum spanning tree of the trees, each pair of trees weighted by
+    its closest pair of points: what Boruvka steps on the true distances add."""
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
+    n_trees = trees.max() + 1
+    squared = sequential_squared_distances(points[:, None, :], points[None, :, :])
+    gaps = np.full((n_trees, n_trees), np.inf)
+    np.minimum.at(gaps, (trees[:, None], trees[None, :]), np.sqrt(squared))
+    np.fill_diagonal(gaps, 0)
+    # csgraph reads zero as no edge: coincident points of two trees travel as the tiniest.
+    weights = np.where(gaps == 0, np.finfo(float).tiny, gaps)
+    np.fill_diagonal(weights, 0)
+    tree = minimum_spanning_tree(weights)
+    return np.sort(np.where(tree.data <= np.finfo(float).tiny, 0.0, tree.data))
+
+
+@given(points=point_sets(), n_neighbors=st.sampled_from([1, 2]), target=st.integers(1, 6))
+def test_completion_is_the_single_linkage_between_trees(points, n_neighbors, target):
+    # The k-NN forest falls apart into trees; completing it adds the minimum spanning
+    # tree between them on the true distances, as Boruvka steps would.
+    n = len(points)
+    forest, forest_lengths, reach = knn_forest(points, n_neighbors)
+    trees = _components(n, forest)
+    if trees.max() == 0:
+        return
+    layout = _ZOrder(points, _pyramid_cell(reach))
+
+    def zorder():  # the caller makes it on demand
+        return layout
+
+    full, full_lengths, whole = _complete_forest(points, forest, forest_lengths, zorder, 1, 1)
+    assert whole and len(full) == n - 1
+    np.testing.assert_array_equal(full_lengths, np.sort(full_lengths))
+    added = list(full_lengths)
+    for length in forest_lengths:
+        added.remove(length)
+    expected = single_linkage_between_trees(points, trees)
+    np.testing.assert_allclose(np.sort(added), expected, rtol=1e-12, atol=1e-300)
+    # Completed only until target components remain: the same forest up to there.
+    part, part_lengths, _ = _complete_forest(points, forest, forest_lengths, zorder, target, 1)
+    if target >= n:
+        return
+    limit = full_lengths[n - 1 - target]
+    np.testing.assert_array_equal(
+        part_lengths[part_lengths <= limit], full_lengths[full_lengths <= limit]
+    )
+    assert same_partition(
+        _components(n, part[part_lengths <= limit]), _components(n, full[full_lengths <= limit])
+    )
+
+
+@given(
+    points=point_sets(),
+    n_groups=st.integers(2, 6),
+    radius=st.floats(0.05, 5),
+    big_labels=st.booleans(),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_nearest_in_other_group_matches_brute_force(points, n_groups, radius, big_labels, seed):
+    rng = np.random.default_rng(seed)
+    n = len(points)
+    # Groups by blob half the time, at random otherwise; on a subset of the points.
+    groups = rng.integers(0, n_groups, size=n) * (100_000 if big_labels else 1)
+    subset = np.sort(rng.choice(n, size=max(2, n // 2), replace=False))
+    zorder = _ZOrder(points, float(rng.uniform(0.01, 1)))
+    pyramid = _GridPyramid(zorder, groups[subset], radius, subset=subset)
+    source, target, lengths = _nearest_in_other_group(pyramid, radius)
+    sub, sub_groups = points[subset], groups[subset]
+    squared = sequential_squared_distances(sub[:, None, :], sub[None, :, :])
+    squared[sub_groups[:, None] == sub_groups[None, :]] = np.inf
+    bound = np.nextafter(radius, np.inf)
+    nearest = squared.min(axis=1)
+    expected = np.flatnonzero(nearest < bound * bound)
+    np.testing.assert_array_equal(np.sort(source), expected)
+    order = np.argsort(source)
+    source, target, lengths = source[order], target[order], lengths[order]
+    np.testing.assert_array_equal(lengths, np.sqrt(nearest[expected]))
+    np.testing.assert_array_equal(squared[source, target], nearest[expected])
+
+
+def test_many_far_apart_objects():
+    # The k-NN graph falls apart into 60 objects, fewer clusters are asked: the single
+    # linkage between objects is completed only as far as needed, then checked.
+    rng = np.random.default_rng(0)
+    centres = np.stack(np.meshgrid(*[np.arange(4) * 6.0] * 3), axis=-1).reshape(-1, 3)[:60]
+    points = (centres[:, None, :] + rng.normal(scale=0.3, size=(60, 15, 3))).reshape(-1, 3)
+    for n_clusters, min_cluster_size in [(10, 4), (25, 15), (59, 1)]:
+        labels, radius = euclidean_clustering(
+            points, n_clusters=n_clusters, min_cluster_size=min_cluster_size
+        )
+        assert same_partition(labels, reference_labels(points, radius, min_cluster_size))
+        assert labels.max() + 1 == n_clusters
+
+
+def test_unreachable_count_after_partial_completion():
+    # 30 far-apart blobs of 5 points: no radius gives 10 components of 30 points; the
+    # partly completed forest cannot say which radius gives the most, so it is completed.
+    rng = np.random.default_rng(1)
+    centres = rng.uniform(0, 100, size=(30, 3))
+    points = (centres[:, None, :] + rng.normal(scale=0.2, size=(30, 5, 3))).reshape(-1, 3)
+    with pytest.warns(UserWarning, match="No radius tried gives n_clusters=10"):
+        labels, radius = euclidean_clustering(points, n_clusters=10, min_cluster_size=30)
+    assert same_partition(labels, reference_labels(points, radius, 30))
+
+
+def test_gaps_rounded_to_adjacent_floats():
+    # 0.3 - 0.1 and 0.5 - 0.3 round to adjacent floats: no float lies between them, and
+    # the midpoint between the two merge lengths used to be the upper one, so that the
+    # missing-edge repair found the same edge forever (n_neighbors=1) or the clusters
+    # were not those of the radius (n_neighbors>=2).
+    points = np.array([[0.1], [0.3], [0.5]])
+    for n_neighbors in (1, 2, 6):
+        labels, radius = euclidean_clustering(
+            points, n_clusters=2, min_cluster_size=1, n_neighbors=n_neighbors
+        )
+        assert labels.tolist() == [0, 0, 1]
+        assert radius == 0.3 - 0.1
+        assert same_partition(labels, reference_labels(points, radius, 1))
+
+
+def test_closest_pair_on_the_bounding_boxes():
+    # Two pairs of points on a line: the closest pair between them is the gap of their
+    # bounding boxes, which the box-pruned Boruvka step of _neighbors rounds away (it
+    # then finds no edge and the completion never ended).
+    points = np.array([[-2.5], [-2.0], [2.1], [2.6]])
+    labels, radius = euclidean_clustering(points, n_clusters=1, min_cluster_size=1, n_neighbors=1)
+    assert labels.tolist() == [0, 0, 0, 0]
+    assert same_partition(labels, reference_labels(points, radius, 1))

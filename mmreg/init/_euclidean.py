@@ -8,9 +8,17 @@ radius-graph edge missing from the k-NN graph can only join two points that both
 all their ``k`` nearest neighbours within the radius ("saturated" points), so only those
 are searched for edges between different components; any found are added to the forest
 and the radius is chosen again. When the k-NN graph falls apart into more pieces than
-the count asked for (far-apart objects, few clusters wanted), Boruvka steps on the true
-distances first join its trees."""
+the count asked for (far-apart objects, few clusters wanted), its trees are first joined
+by the minimum spanning tree between them on the true distances (what Boruvka steps
+would add), up to the length that the choice of the radius can need.
 
+The searches between components, exact to the last bit of every distance, run on a grid
+pyramid (:class:`_GridPyramid`): the points sorted by component and Z-order, one node per
+component and cell at every scale, and pairs of nodes refined a level at a time while
+their bounding boxes can still hold an answer - a dual-tree search on arrays, with no
+loop over points and no list of all the pairs within a radius."""
+
+import functools
 import warnings
 from numbers import Integral, Real
 
@@ -25,7 +33,6 @@ from mmreg._neighbors import (
     connected_labels,
     minimum_spanning_forest,
     nearest_in_other_component,
-    shortest_edges_between_components,
 )
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 
@@ -34,6 +41,13 @@ __all__ = ["EuclideanClustering", "euclidean_clustering"]
 # Listing the close pairs of the saturated points is faster than the per-bit KD-tree
 # search of `nearest_in_other_component` until there are about this many per point.
 _PAIRS_PER_POINT = 64
+# Above this dimension the grid pyramid's 2**d children per cell cost too much, and a
+# KD-tree sums squared distances in another order: the KD-tree searches are used instead.
+_MAX_PYRAMID_DIM = 6
+# The searches between groups refine their pairs of cells level by level; when there are
+# more than this many pairs of cells per pair of groups, they first tighten their bounds
+# (the radius that suffices, the pairs that cannot be in the spanning forest).
+_PAIRS_BEFORE_PRUNING = 4
 
 
 def _components(n_points, edges):
@@ -70,8 +84,11 @@ def _radius_between(thresholds, k):
     if k < 0:
         return thresholds[0] / 2
     if k + 1 < len(thresholds):
-        # Midway, so that rounding in other distance computations cannot cross it.
-        return (thresholds[k] + thresholds[k + 1]) / 2
+        # Midway, so that rounding in other distance computations cannot cross it; but
+        # no float lies between two adjacent ones (the same gap rounded two ways, as
+        # 0.3 - 0.1 and 0.5 - 0.3), and the midpoint would round up to the next length.
+        middle = (thresholds[k] + thresholds[k + 1]) / 2
+        return middle if middle < thresholds[k + 1] else thresholds[k]
     return 2 * thresholds[k] if thresholds[k] > 0 else 1.0
 
 
@@ -151,6 +168,339 @@ def _choose_radius(n_points, forest, forest_lengths, n_clusters, min_cluster_siz
     return _radius_between(thresholds, lo), point_node, True
 
 
+def _squared_distances(a, b):
+    """Squared distances of the columns of ``a`` and ``b`` (shape ``(d, m)``), summed over
+    the axes in order: the sum a KD-tree query computes, so that the lengths (and the
+    radius chosen from them) are the ones the tree would give, to the last bit."""
+    diff = a[0] - b[0]
+    total = diff * diff
+    for axis in range(1, len(a)):
+        diff = a[axis] - b[axis]
+        total += diff * diff
+    return total
+
+
+def _squared_box_gaps(lo_a, hi_a, lo_b, hi_b):
+    """Squared gaps between boxes (shape ``(d, m)``): never more than the squared
+    distance of two of their points as :func:`_squared_distances` rounds it."""
+    total = np.zeros(lo_a.shape[1])
+    for axis in range(len(lo_a)):
+        gap = np.maximum(lo_b[axis] - hi_a[axis], lo_a[axis] - hi_b[axis])
+        np.maximum(gap, 0, out=gap)
+        total += gap * gap
+    return total
+
+
+def _squared_box_reaches(lo, hi, x):
+    """Squared distances from the points ``x`` to the farthest corners of the boxes: never
+    less than the squared distance of a point of the box to ``x``."""
+    total = np.zeros(lo.shape[1])
+    for axis in range(len(lo)):
+        far = np.maximum(np.abs(x[axis] - lo[axis]), np.abs(x[axis] - hi[axis]))
+        total += far * far
+    return total
+
+
+def _morton_codes(cells, bits):
+    """Interleave the bits of the non-negative integer cell coordinates (Z-order);
+    ``cells`` has shape ``(d, n)``, each below ``2**bits``."""
+    d = len(cells)
+    spread = np.zeros(256, dtype=np.int64)
+    for bit in range(8):
+        spread |= ((np.arange(256, dtype=np.int64) >> bit) & 1) << (bit * d)
+    codes = np.zeros(cells.shape[1], dtype=np.int64)
+    for byte in range((bits + 7) // 8):
+        for axis in range(d):
+            codes |= spread[(cells[axis] >> (8 * byte)) & 255] << (8 * byte * d + axis)
+    return codes
+
+
+def _ragged_product(start_a, count_a, start_b, count_b):
+    """Every ``(i, j)`` with ``i`` in ``start_a[k] + range(count_a[k])`` and ``j`` likewise
+    from ``b``, for every ``k``: returns ``k``, ``i`` and ``j``."""
+    per = count_a * count_b
+    owner = np.repeat(np.arange(len(per)), per)
+    offset = np.arange(len(owner)) - np.repeat(np.cumsum(per) - per, per)
+    width = count_b[owner]
+    return owner, start_a[owner] + offset // width, start_b[owner] + offset % width
+
+
+def _first_per_key(keys, values):
+    """Index of the smallest value for each distinct key (ties: the first)."""
+    order = np.lexsort((values, keys))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = keys[order[1:]] != keys[order[:-1]]
+    return order[first]
+
+
+class _ZOrder:
+    """Points axis by axis, their grid cells of side ``cell``, the cells' Z-order codes
+    and the points' order by code: computed once, shared by the pyramids of any subset
+    of the points."""
+
+    def __init__(self, points, cell):
+        self.coords = np.ascontiguousarray(points.T)
+        d = len(self.coords)
+        low = self.coords.min(axis=1)
+        extent = float(np.max(self.coords.max(axis=1) - low)) if self.coords.size else 0.0
+        bits = 62 // d
+        self.cell = max(cell, extent / 2 ** (bits - 1), np.finfo(float).tiny)
+        cells = np.floor((self.coords - low[:, None]) / self.cell).astype(np.int64)
+        np.minimum(cells, 2**bits - 1, out=cells)
+        self.bits = max(int(cells.max()).bit_length(), 1) if cells.size else 1
+        self.codes = _morton_codes(cells, self.bits)
+        self.by_code = np.argsort(self.codes, kind="stable")
+
+    def sort(self, groups, subset=None):
+        """Order of the points of ``subset`` (all by default) by group, then code:
+        positions in ``subset``."""
+        if subset is None:
+            by_code = self.by_code
+        else:
+            position = np.full(len(self.codes), -1, dtype=np.intp)
+            position[subset] = np.arange(len(subset))
+            by_code = position[self.by_code]
+            by_code = by_code[by_code >= 0]
+        # A stable sort by group of the points in code order; on 16-bit keys numpy sorts
+        # stably in linear time (radix sort).
+        key = groups[by_code]
+        if len(key) and int(key.max()) < 2**16:
+            key = key.astype(np.uint16)
+        return by_code[np.argsort(key, kind="stable")]
+
+
+class _GridPyramid:
+    """Grid cells of the points at every scale, each cell split by group.
+
+    The points (``subset`` of those of ``zorder``) are sorted by group, then by the
+    Z-order of their cell. Level 0 holds the points themselves; a node of level
+    ``l >= 1`` is the set of points of one group in one cell of side
+    ``zorder.cell * 2**(l - 1)``: a run of the sorted points, whose children are the
+    nodes of level ``l - 1`` in that run. Levels stop at the first whose side reaches
+    ``top_side`` (or when every group is one node). Coordinates are stored axis by axis,
+    shape ``(d, n_nodes)``; ``order`` maps the sorted points back to ``subset``.
+
+    Two nodes' bounding boxes bound the distances of their points from below; the
+    distance of two of their points (``rep``: the middle one of each run) from above.
+    Searches start from the pairs of nodes of one level and descend, splitting the pairs
+    and dropping those that cannot hold an answer: a dual-tree search, one level at a
+    time, on arrays.
+    """
+
+    def __init__(self, zorder, groups, top_side=np.inf, subset=None):
+        groups = np.asarray(groups, dtype=np.int64)
+        self.order = zorder.sort(groups, subset)
+        index = self.order if subset is None else subset[self.order]
+        keys = zorder.codes[index]
+        self.groups = groups[self.order]
+        self.coords = zorder.coords[:, index]
+        d, n = self.coords.shape
+        bits = zorder.bits
+        # The highest bit in which consecutive sorted points differ: a node boundary at
+        # every level below it; a change of group is a boundary at every level.
+        differ = keys[1:] ^ keys[:-1]
+        group_change = self.groups[1:] != self.groups[:-1]
+        n_groups = int(np.count_nonzero(group_change)) + 1
+        self.side = [0.0]
+        self.starts = [np.arange(n)]
+        self.first_child = [None]
+        self.n_children = [None]
+        self.lo = [self.coords]
+        self.hi = [self.coords]
+        self.rep = [self.coords]
+        level = 1
+        while True:
+            shift = d * (level - 1)
+            change = (differ >> shift) != 0
+            change |= group_change
+            starts = np.concatenate([[0], np.flatnonzero(change) + 1])
+            first_child = np.searchsorted(self.starts[-1], starts)
+            ends = np.append(starts[1:], n)
+            self.side.append(zorder.cell * 2.0 ** (level - 1))
+            self.starts.append(starts)
+            self.first_child.append(first_child)
+            self.n_children.append(np.diff(np.append(first_child, len(self.starts[-2]))))
+            self.lo.append(np.minimum.reduceat(self.lo[-1], first_child, axis=1))
+            self.hi.append(np.maximum.reduceat(self.hi[-1], first_child, axis=1))
+            self.rep.append(self.coords[:, (starts + ends) // 2])
+            if len(starts) == n_groups or self.side[-1] >= top_side or shift >= bits * d:
+                break
+            level += 1
+        self.top = level
+
+    def level_for(self, radius):
+        """The finest level whose cells are at least ``radius`` wide (or the top)."""
+        return next((lv for lv in range(1, self.top + 1) if self.side[lv] >= radius), self.top)
+
+    def node_groups(self, level):
+        return self.groups[self.starts[level]]
+
+    def rep_index(self, level):
+        """The sorted position of each node's representative point."""
+        starts = self.starts[level]
+        return (starts + np.append(starts[1:], len(self.groups))) // 2
+
+    def close_pairs(self, level, radius):
+        """Pairs of nodes of ``level``, of different groups, whose boxes are within
+        ``radius`` (squared gap at most ``radius**2``)."""
+        lo, hi = self.lo[level], self.hi[level]
+        if lo.shape[1] < 2:
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        centre = ((lo + hi) / 2).T
+        half = np.sqrt(np.max(np.sum(((hi - lo) / 2) ** 2, axis=0)))
+        pairs = cKDTree(centre).query_pairs(
+            (radius + 2 * half) * (1 + 1e-9) + 1e-300, output_type="ndarray"
+        )
+        a, b = pairs[:, 0].astype(np.intp), pairs[:, 1].astype(np.intp)
+        groups = self.node_groups(level)
+        keep = groups[a] != groups[b]
+        a, b = a[keep], b[keep]
+        keep = _squared_box_gaps(lo[:, a], hi[:, a], lo[:, b], hi[:, b]) <= radius * radius
+        return a[keep], b[keep]
+
+    def split(self, level, a, b):
+        """The pairs of children of the node pairs ``(a, b)`` of ``level``: returns the
+        pair each comes from and the two children (nodes of ``level - 1``)."""
+        first, count = self.first_child[level], self.n_children[level]
+        return _ragged_product(first[a], count[a], first[b], count[b])
+
+
+def _squared_lower_bounds(pyramid, level, a, b):
+    """Squared box gaps of the node pairs ``(a, b)`` of ``level``; at level 0, where the
+    boxes are points, their squared distances (the same numbers, found faster)."""
+    if not level:
+        return _squared_distances(pyramid.coords[:, a], pyramid.coords[:, b])
+    lo, hi = pyramid.lo[level], pyramid.hi[level]
+    return _squared_box_gaps(lo[:, a], hi[:, a], lo[:, b], hi[:, b])
+
+
+def _connected_below(group_a, group_b, lower, upper, n_groups, n_thresholds=4):
+    """Which group pairs are joined, below some threshold ``t <= lower``, by pairs with
+    ``upper < t``: such a pair is the longest edge of a cycle, in no minimum spanning
+    forest of the groups."""
+    joined = np.zeros(len(lower), dtype=bool)
+    finite = lower[np.isfinite(lower)]
+    if not len(finite):
+        return joined
+    for threshold in np.unique(np.quantile(finite, np.linspace(0, 1, n_thresholds + 1)[1:])):
+        below = upper < threshold
+        if not below.any():
+            continue
+        graph = sparse.coo_matrix(
+            (np.ones(np.count_nonzero(below), dtype=bool), (group_a[below], group_b[below])),
+            shape=(n_groups, n_groups),
+        )
+        labels = connected_components(graph, directed=False)[1]
+        joined |= (lower >= threshold) & (labels[group_a] == labels[group_b])
+    return joined
+
+
+def _group_pair_minima(pyramid, radius, n_groups, sufficient_radius=None):
+    """Closest pair of points of the group pairs within ``radius``, exactly.
+
+    Returns the two groups, the two points (original indices) and their distance, for a
+    set of group pairs within ``radius`` that holds every edge up to ``radius`` of the
+    minimum spanning forest of the groups (the single linkage between groups): pairs of
+    groups the bounds show to be joined by shorter pairs are dropped on the way.
+    ``sufficient_radius(group_a, group_b, upper)``, given upper bounds of group pairs'
+    distances, may lower ``radius`` on the way; the returned pairs then hold the edges up
+    to the last radius it gave. Returns that radius last.
+    """
+    empty = np.zeros(0, dtype=np.intp)
+    # A little over radius, so that no pair within it is lost to rounding.
+    squared_radius = radius * radius * (1 + 1e-12)
+    top = pyramid.level_for(radius)
+    a, b = pyramid.close_pairs(top, np.sqrt(squared_radius))
+    if not len(a):
+        return empty, empty, empty, empty, np.zeros(0), radius
+    groups = pyramid.node_groups(top)
+    low, high = np.minimum(groups[a], groups[b]), np.maximum(groups[a], groups[b])
+    keys, pair = np.unique(low * n_groups + high, return_inverse=True)
+    pair = pair.ravel()
+    pair_a, pair_b = keys // n_groups, keys % n_groups
+    best = np.full(len(keys), np.inf)
+    for level in range(top, 0, -1):
+        owner, a, b = pyramid.split(level, a, b)
+        pair = pair[owner]
+        child = level - 1
+        lower = _squared_lower_bounds(pyramid, child, a, b)
+        if child:
+            rep = pyramid.rep[child]
+            # The representatives are points: the best pair so far bounds the minimum.
+            np.minimum.at(best, pair, _squared_distances(rep[:, a], rep[:, b]))
+        else:
+            np.minimum.at(best, pair, lower)
+        if child and sufficient_radius is not None and len(a) > _PAIRS_BEFORE_PRUNING * len(keys):
+            known = np.isfinite(best)
+            radius = min(radius, sufficient_radius(pair_a[known], pair_b[known], best[known]))
+            squared_radius = radius * radius * (1 + 1e-12)
+        keep = lower <= np.minimum(best[pair], squared_radius)
+        a, b, pair, lower = a[keep], b[keep], pair[keep], lower[keep]
+        if child and len(a) > _PAIRS_BEFORE_PRUNING * len(keys):
+            least = np.full(len(keys), np.inf)
+            np.minimum.at(least, pair, lower)
+            dead = _connected_below(pair_a, pair_b, least, best, n_groups)
+            keep = ~dead[pair]
+            a, b, pair, lower = a[keep], b[keep], pair[keep], lower[keep]
+    # Level 0: the lower bounds are the squared distances themselves.
+    first = _first_per_key(pair, lower)
+    return (
+        pair_a[pair[first]],
+        pair_b[pair[first]],
+        pyramid.order[a[first]],
+        pyramid.order[b[first]],
+        np.sqrt(lower[first]),
+        radius,
+    )
+
+
+def _nearest_in_other_group(pyramid, radius):
+    """Each point's nearest point of another group closer than ``radius``, exactly.
+
+    What a KD-tree query bounded by the next float above ``radius`` finds (squared
+    distance below that bound's square). Returns source and target (original indices)
+    and their distance.
+    """
+    empty = np.zeros(0, dtype=np.intp)
+    bound = np.nextafter(radius, np.inf)
+    squared_bound = bound * bound
+    top = pyramid.level_for(bound)
+    a, b = pyramid.close_pairs(top, bound)
+    for level in range(top, 0, -1):
+        _, a, b = pyramid.split(level, a, b)
+        child = level - 1
+        lo, hi, rep = pyramid.lo[child], pyramid.hi[child], pyramid.rep[child]
+        lower = _squared_lower_bounds(pyramid, child, a, b)
+        keep = lower < squared_bound
+        a, b, lower = a[keep], b[keep], lower[keep]
+        if not child:
+            break  # The points themselves: lower holds their squared distances.
+        # Every point of node a has a point of another group within reach[a] of it.
+        reach = np.full(lo.shape[1], np.inf)
+        np.minimum.at(reach, a, _squared_box_reaches(lo[:, a], hi[:, a], rep[:, b]))
+        np.minimum.at(reach, b, _squared_box_reaches(lo[:, b], hi[:, b], rep[:, a]))
+        keep = (lower <= reach[a]) | (lower <= reach[b])
+        a, b, lower = a[keep], b[keep], lower[keep]
+    if not len(a):
+        return empty, empty, np.zeros(0)
+    # Each point's smallest squared distance, then one pair that attains it.
+    nearest = np.full(len(pyramid.groups), np.inf)
+    np.minimum.at(nearest, a, lower)
+    np.minimum.at(nearest, b, lower)
+    target = np.full(len(nearest), -1, dtype=np.intp)
+    for source, other in ((a, b), (b, a)):
+        attains = lower == nearest[source]
+        target[source[attains]] = other[attains]
+    source = np.flatnonzero(target >= 0)
+    return pyramid.order[source], pyramid.order[target[source]], np.sqrt(nearest[source])
+
+
+def _pyramid_cell(reach):
+    """Finest cell side of the pyramids: the typical distance to the k-th neighbour."""
+    finite = reach[np.isfinite(reach) & (reach > 0)]
+    return float(np.median(finite)) if len(finite) else 0.0
+
+
 class _MissingEdges:
     """Radius-graph edges that join two components of the forest, found without the forest.
 
@@ -162,7 +512,8 @@ class _MissingEdges:
     each saturated point's nearest neighbour in another component is searched instead.
     """
 
-    def __init__(self, points, tree, reach, n_neighbors, workers):
+    def __init__(self, points, tree, reach, n_neighbors, workers, zorder):
+        self.zorder = zorder
         self.points = points
         self.tree = tree
         self.reach = reach
@@ -200,6 +551,17 @@ class _MissingEdges:
         self.lengths = np.minimum(np.concatenate(lengths), radius)
         self.listed_radius = radius
 
+    def _nearest_across(self, saturated, components, radius):
+        if self.points.shape[1] > _MAX_PYRAMID_DIM:
+            return nearest_in_other_component(
+                self.points[saturated], components, max_distance=radius, workers=self.workers
+            )
+        _, groups = np.unique(components, return_inverse=True)
+        pyramid = _GridPyramid(
+            self.zorder(), groups.ravel(), np.nextafter(radius, np.inf), subset=saturated
+        )
+        return _nearest_in_other_group(pyramid, radius)
+
     def __call__(self, components, radius):
         empty = np.zeros((0, 2), dtype=np.intp), np.zeros(0)
         if radius > self.listed_radius:
@@ -210,11 +572,8 @@ class _MissingEdges:
                 ratio = radius / self.reach[saturated]
             expected_pairs = np.sum((self.n_neighbors + 1) * ratio ** self.points.shape[1])
             if expected_pairs > _PAIRS_PER_POINT * len(self.points):
-                source, target, lengths = nearest_in_other_component(
-                    self.points[saturated],
-                    components[saturated],
-                    max_distance=radius,
-                    workers=self.workers,
+                source, target, lengths = self._nearest_across(
+                    saturated, components[saturated], radius
                 )
                 return saturated[np.column_stack([source, target])], np.minimum(lengths, radius)
             self._list_pairs(saturated, radius)
@@ -224,37 +583,177 @@ class _MissingEdges:
         return pairs[across], lengths[across]
 
 
-def _complete_forest(points, forest, forest_lengths, workers):
-    """Join the trees of the forest into one by Boruvka steps on the true distances."""
-    n = len(points)
+def _group_forest(group_a, group_b, lengths, n_groups):
+    """Minimum spanning forest of the groups joined by the given pairs: the index of the
+    pairs it keeps, and the tree of every group."""
+    forest, _ = minimum_spanning_forest(n_groups, np.column_stack([group_a, group_b]), lengths)
+    # Map the forest's group edges back to the pairs given (the shortest of repeats).
+    keys = np.minimum(group_a, group_b) * n_groups + np.maximum(group_a, group_b)
+    first = _first_per_key(keys, lengths)
+    forest_keys = np.minimum(forest[:, 0], forest[:, 1]) * n_groups + np.maximum(
+        forest[:, 0], forest[:, 1]
+    )
+    chosen = first[np.searchsorted(keys[first], forest_keys)]
+    return chosen, _components(n_groups, forest)
+
+
+def _boruvka_step(points, components, workers):
+    """Each component's shortest edge to another one, on the true distances.
+
+    :func:`~mmreg._neighbors.shortest_edges_between_components` prunes with bounding
+    boxes whose rounding can drop the closest pair when it is the boxes' own gap (points
+    on a line), so this asks every point for its nearest point in another component.
+    """
+    source, target, lengths = nearest_in_other_component(points, components, workers=workers)
+    first = _first_per_key(components[source], lengths)
+    return np.column_stack([source[first], target[first]]), lengths[first]
+
+
+def _spanning_bound(pyramid, n_groups):
+    """Pairs of points (their groups and lengths) that join all the groups into one: the
+    single linkage of the groups is no longer at any count. From the k-NN graph of the
+    representative points of a coarse level, joined by Boruvka steps on those points if
+    it falls apart."""
+    level = next(
+        (lv for lv in range(1, pyramid.top + 1) if len(pyramid.starts[lv]) <= 2 * n_groups),
+        pyramid.top,
+    )
+    reps, groups = pyramid.rep[level].T, pyramid.node_groups(level)
+    k = min(8, len(reps) - 1)
+    _, neighbours = cKDTree(reps).query(reps, k=k + 1)
+    a = np.repeat(np.arange(len(reps)), k + 1)
+    b = neighbours.reshape(-1)
+    keep = groups[a] != groups[b]
+    a, b = a[keep], b[keep]
     while True:
-        trees = _components(n, forest)
-        if trees.max() == 0:
-            return forest, forest_lengths
-        edges, lengths = shortest_edges_between_components(points, trees, workers=workers)
-        forest, forest_lengths = minimum_spanning_forest(
-            n, np.vstack([forest, edges]), np.concatenate([forest_lengths, lengths])
+        lengths = np.sqrt(_squared_distances(reps[a].T, reps[b].T))
+        chosen, tree_of = _group_forest(groups[a], groups[b], lengths, n_groups)
+        a, b = a[chosen], b[chosen]
+        if tree_of.max() == 0:
+            return groups[a], groups[b], lengths[chosen]
+        # Join the pieces on the representatives (few points): one Boruvka step.
+        extra, _ = _boruvka_step(reps, tree_of[groups], workers=1)
+        a, b = np.concatenate([a, extra[:, 0]]), np.concatenate([b, extra[:, 1]])
+
+
+def _complete_forest(points, forest, forest_lengths, zorder, target, workers):
+    """Join the trees of the forest by the minimum spanning tree between the trees (the
+    single linkage of the trees on the true distances, which Boruvka steps give), as far
+    as the choice of the radius needs.
+
+    Its edges are added up to a length ``R`` at which the completed forest has at most
+    ``target`` components, so that the result and the completed forest have the same
+    edges up to ``R``; ``target=1`` completes it all. Returns the forest, its lengths and
+    whether it is a single tree.
+    """
+    n = len(points)
+    trees = _components(n, forest)
+    n_trees = int(trees.max()) + 1
+    target = max(target, 1)
+    if points.shape[1] > _MAX_PYRAMID_DIM:
+        while n_trees > 1:
+            edges, lengths = _boruvka_step(points, trees, workers=workers)
+            forest, forest_lengths = minimum_spanning_forest(
+                n, np.vstack([forest, edges]), np.concatenate([forest_lengths, lengths])
+            )
+            trees = _components(n, forest)
+            n_trees = int(trees.max()) + 1
+        return forest, forest_lengths, True
+    pyramid = _GridPyramid(zorder(), trees)
+    bound_a, bound_b, bound = _spanning_bound(pyramid, n_trees)
+    needed = n - target  # edges of length <= R needed
+
+    def sufficient_radius(group_a, group_b, squared_upper):
+        # Any pairs joining trees bound the trees' single linkage from above, so with
+        # them the forest has no fewer components at any length than when completed:
+        # where it falls to target components, R suffices.
+        upper = np.concatenate([bound, np.sqrt(squared_upper)])
+        chosen, _ = _group_forest(
+            np.concatenate([bound_a, group_a]), np.concatenate([bound_b, group_b]), upper, n_trees
         )
+        upper = np.sort(upper[chosen])
+        # With j of these edges, needed - j forest edges: R = max(both longest).
+        j = np.arange(len(upper) + 1)
+        from_forest = needed - j - 1
+        forest_part = np.where(
+            from_forest < 0,
+            -np.inf,
+            forest_lengths[np.clip(from_forest, 0, len(forest_lengths) - 1)],
+        )
+        forest_part[from_forest >= len(forest_lengths)] = np.inf
+        return float(np.min(np.maximum(np.concatenate([[-np.inf], upper]), forest_part)))
+
+    radius = sufficient_radius(bound_a[:0], bound_b[:0], bound[:0])
+    while True:
+        group_a, group_b, p, q, lengths, radius = _group_pair_minima(
+            pyramid, radius, n_trees, sufficient_radius
+        )
+        chosen, _ = _group_forest(group_a, group_b, lengths, n_trees)
+        edges, lengths = np.column_stack([p[chosen], q[chosen]]), lengths[chosen]
+        whole = len(edges) == n_trees - 1
+        if whole or n - np.count_nonzero(forest_lengths <= radius) - len(edges) <= target:
+            break
+        radius = 2 * radius if radius > 0 else float(bound.max()) or 1.0  # Not expected.
+    edges = np.vstack([forest, edges])
+    lengths = np.concatenate([forest_lengths, lengths])
+    order = np.argsort(lengths, kind="stable")
+    return edges[order], lengths[order], whole
 
 
-def _radius_for_count(points, n_clusters, min_cluster_size, n_neighbors, workers):
+def _add_to_forest(n_points, forest, forest_lengths, edges, lengths):
+    """Minimum spanning forest of a minimum spanning forest and more edges.
+
+    The forest's edges shorter than every new edge stay (a cycle through one of them
+    holds a longer new edge): their trees are contracted, and only the longer forest
+    edges and the new ones are left to the spanning-forest algorithm.
+    """
+    kept = np.searchsorted(forest_lengths, lengths.min(), side="left")
+    nodes = _components(n_points, forest[:kept])
+    rest = np.vstack([forest[kept:], edges])
+    rest_lengths = np.concatenate([forest_lengths[kept:], lengths])
+    chosen, _ = _group_forest(nodes[rest[:, 0]], nodes[rest[:, 1]], rest_lengths, nodes.max() + 1)
+    chosen = chosen[np.argsort(rest_lengths[chosen], kind="stable")]
+    return (
+        np.vstack([forest[:kept], rest[chosen]]),
+        np.concatenate([forest_lengths[:kept], rest_lengths[chosen]]),
+    )
+
+
+def _radius_for_count(
+    points, n_clusters, min_cluster_size, n_neighbors, workers, *, complete_all=False
+):
     n = len(points)
     tree = cKDTree(points)
     edges, lengths, reach = _knn_edges(points, tree, n_neighbors, workers)
     forest, forest_lengths = minimum_spanning_forest(n, edges, lengths)
-    missing_edges = _MissingEdges(points, tree, reach, n_neighbors, workers)
+    # The grid cells of the points, for the searches between components: made once, if
+    # any is needed.
+    zorder = functools.cache(lambda: _ZOrder(points, _pyramid_cell(reach)))
+    missing_edges = _MissingEdges(points, tree, reach, n_neighbors, workers, zorder)
+    partial = False
     while True:
         choice = _choose_radius(n, forest, forest_lengths, n_clusters, min_cluster_size)
         if choice is None:
-            forest, forest_lengths = _complete_forest(points, forest, forest_lengths, workers)
+            if partial:
+                break
+            target = 1 if complete_all else n_clusters - 1
+            forest, forest_lengths, whole = _complete_forest(
+                points, forest, forest_lengths, zorder, target, workers
+            )
+            partial = not whole
             continue
         radius, components, reached = choice
+        if partial and not reached:
+            break
         missing, missing_lengths = missing_edges(components, radius)
         if not len(missing):
             return radius, components, reached
-        forest, forest_lengths = minimum_spanning_forest(
-            n, np.vstack([forest, missing]), np.concatenate([forest_lengths, missing_lengths])
-        )
+        forest, forest_lengths = _add_to_forest(n, forest, forest_lengths, missing, missing_lengths)
+    # The forest was completed only up to the radii that usually matter, and this choice
+    # needs the rest: start again, completing it all, as the choice would have seen it.
+    return _radius_for_count(
+        points, n_clusters, min_cluster_size, n_neighbors, workers, complete_all=True
+    )
 
 
 def euclidean_clustering(
@@ -386,8 +885,9 @@ class EuclideanClustering(PartitionInitializer):
     2-core machine, ``make_scene(noise=0.03)`` with ``n_clusters=100`` took 0.13 s for
     22,395 points, 0.5 s for 100,000 and 9 s for 1,000,000 (where the pair listing,
     about 12 pairs per point, and the spanning forest dominate). Asking for fewer
-    clusters than there are far-apart groups of points adds Boruvka steps, ``O(n log n)``
-    each (22,395 points, 7 objects, ``n_clusters=5``: 0.3 to 0.9 s). With an explicit
+    clusters than there are far-apart groups of points adds the single linkage between
+    those groups, found on a grid pyramid (one sort and ``O(n)`` array passes per level,
+    plus the pairs of cells that face each other across the gaps). With an explicit
     ``radius`` the cost is that of the radius graph, which grows with the number of
     pairs within ``radius``.
 
