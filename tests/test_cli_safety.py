@@ -60,7 +60,7 @@ def _snapshot(folder):
 
 # --------------------------------------------------------------------------- truncated .ply
 @pytest.mark.parametrize("which", ["input", "target"])
-def test_truncated_ply_is_an_error_naming_the_counts(tmp_path, scene, which, capsys):
+def test_truncated_ply_is_an_error_naming_the_counts(tmp_path, scene, which, capsys, monkeypatch):
     """Open3D zero-filled the missing vertices and printed a warning on stdout even with -q."""
     mmio.write_point_cloud(tmp_path / "a.ply", scene.a)
     mmio.write_point_cloud(tmp_path / "b.ply", scene.b)
@@ -73,11 +73,8 @@ def test_truncated_ply_is_an_error_naming_the_counts(tmp_path, scene, which, cap
         result = mmreg("register", *args, "--out", "out", "-q", cwd=tmp_path)
         code, out, err = result.returncode, result.stdout, result.stderr
     else:
-        os.chdir(tmp_path)
-        try:
-            code, out, err = _run("register", *args, "--out", "out", "-q", capsys=capsys)
-        finally:
-            os.chdir("/")
+        monkeypatch.chdir(tmp_path)
+        code, out, err = _run("register", *args, "--out", "out", "-q", capsys=capsys)
     assert code == 2
     assert out == ""
     assert err.count("\n") == 1
@@ -88,29 +85,28 @@ def test_truncated_ply_is_an_error_naming_the_counts(tmp_path, scene, which, cap
 
 
 # --------------------------------------------------------------------------- result folders
-def test_the_default_out_differs_per_input_and_is_never_replaced(tmp_path, scene, capsys):
+def test_the_default_out_differs_per_input_and_is_never_replaced(
+    tmp_path, scene, capsys, monkeypatch
+):
     for folder in ("seq1", "seq2"):
         (tmp_path / folder).mkdir()
         np.save(tmp_path / folder / "000000.npy", scene.X)
-    os.chdir(tmp_path)
-    try:
-        for folder in ("seq1", "seq2"):
-            code, _, err = _run("register", f"{folder}/000000.npy", "-q", capsys=capsys)
-            assert code == 0, err
-        results = [p for p in _listing(tmp_path) if p.startswith("000000-mmreg-")]
-        assert len(results) == 2  # one per input, neither replaced
-        first = tmp_path / register_command.default_out(
-            type("A", (), {"input": "seq1/000000.npy", "target": None, "flow": None})
-        )
-        before = _snapshot(first)
-        code, _, err = _run("register", "seq1/000000.npy", "-q", capsys=capsys)
-        assert code == 2
-        assert f"{first.name}: a result already exists there; pass --overwrite" in err
-        assert _snapshot(first) == before
-        code, _, err = _run("register", "seq1/000000.npy", "-q", "--overwrite", capsys=capsys)
+    monkeypatch.chdir(tmp_path)
+    for folder in ("seq1", "seq2"):
+        code, _, err = _run("register", f"{folder}/000000.npy", "-q", capsys=capsys)
         assert code == 0, err
-    finally:
-        os.chdir("/")
+    results = [p for p in _listing(tmp_path) if p.startswith("000000-mmreg-")]
+    assert len(results) == 2  # one per input, neither replaced
+    first = tmp_path / register_command.default_out(
+        type("A", (), {"input": "seq1/000000.npy", "target": None, "flow": None})
+    )
+    before = _snapshot(first)
+    code, _, err = _run("register", "seq1/000000.npy", "-q", capsys=capsys)
+    assert code == 2
+    assert f"{first.name}: a result already exists there; pass --overwrite" in err
+    assert _snapshot(first) == before
+    code, _, err = _run("register", "seq1/000000.npy", "-q", "--overwrite", capsys=capsys)
+    assert code == 0, err
 
 
 @pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "rename-aside"])
