@@ -22,8 +22,10 @@ from mmreg.init._euclidean import (
     _components,
     _GridPyramid,
     _knn_edges,
+    _knn_forest,
     _nearest_in_other_group,
     _pyramid_cell,
+    _radius_for_count,
     _ZOrder,
 )
 
@@ -272,6 +274,23 @@ def knn_forest(points, n_neighbors):
     return forest, forest_lengths, reach
 
 
+@given(points=point_sets(), n_neighbors=st.sampled_from([1, 2, 6]))
+def test_knn_forest_is_the_spanning_forest_of_the_knn_edges(points, n_neighbors):
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points)
+    forest, lengths, reach = _knn_forest(points, tree, n_neighbors, 1)
+    expected, expected_lengths, expected_reach = knn_forest(points, n_neighbors)
+    np.testing.assert_array_equal(lengths, expected_lengths)
+    np.testing.assert_array_equal(reach, expected_reach)
+    n = len(points)
+    for length in np.unique(lengths):
+        assert same_partition(
+            _components(n, forest[lengths <= length]),
+            _components(n, expected[expected_lengths <= length]),
+        )
+
+
 def single_linkage_between_trees(points, trees):
     """Lengths of the minimum spanning tree of the trees, each pair of trees weighted by
     its closest pair of points: what Boruvka steps on the true distances add."""
@@ -303,7 +322,7 @@ def test_completion_is_the_single_linkage_between_trees(points, n_neighbors, tar
     def zorder():  # the caller makes it on demand
         return layout
 
-    full, full_lengths, whole = _complete_forest(points, forest, forest_lengths, zorder, 1, 1)
+    full, full_lengths, whole, _ = _complete_forest(points, forest, forest_lengths, zorder, 1, 1)
     assert whole and len(full) == n - 1
     np.testing.assert_array_equal(full_lengths, np.sort(full_lengths))
     added = list(full_lengths)
@@ -312,7 +331,7 @@ def test_completion_is_the_single_linkage_between_trees(points, n_neighbors, tar
     expected = single_linkage_between_trees(points, trees)
     np.testing.assert_allclose(np.sort(added), expected, rtol=1e-12, atol=1e-300)
     # Completed only until target components remain: the same forest up to there.
-    part, part_lengths, _ = _complete_forest(points, forest, forest_lengths, zorder, target, 1)
+    part, part_lengths, _, _ = _complete_forest(points, forest, forest_lengths, zorder, target, 1)
     if target >= n:
         return
     limit = full_lengths[n - 1 - target]
@@ -353,6 +372,30 @@ def test_nearest_in_other_group_matches_brute_force(points, n_groups, radius, bi
     np.testing.assert_array_equal(squared[source, target], nearest[expected])
 
 
+@given(
+    points=point_sets(),
+    decimals=st.sampled_from([None, 1]),
+    n_clusters=st.integers(1, 12),
+    min_cluster_size=st.integers(1, 4),
+    n_neighbors=st.sampled_from([1, 2, 6]),
+)
+def test_partial_completion_chooses_as_the_full_one(
+    points, decimals, n_clusters, min_cluster_size, n_neighbors
+):
+    # The forest is completed only as far as the choice of the radius looks; completing
+    # it all must not change the radius nor the clusters. Points on a 0.1 grid give
+    # equal lengths and lengths one float apart, where a choice looks furthest.
+    if decimals is not None:
+        points = np.round(points, decimals)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        args = (points, n_clusters, min_cluster_size, n_neighbors, 1)
+        radius, components, reached = _radius_for_count(*args)
+        full_radius, full_components, full_reached = _radius_for_count(*args, complete_all=True)
+    assert radius == full_radius and reached == full_reached
+    assert same_partition(components, full_components)
+
+
 def test_many_far_apart_objects():
     # The k-NN graph falls apart into 60 objects, fewer clusters are asked: the single
     # linkage between objects is completed only as far as needed, then checked.
@@ -365,6 +408,23 @@ def test_many_far_apart_objects():
         )
         assert same_partition(labels, reference_labels(points, radius, min_cluster_size))
         assert labels.max() + 1 == n_clusters
+
+
+@pytest.mark.parametrize("n_neighbors", [1, 2, 6])
+def test_many_small_trees(n_neighbors):
+    # With one or two neighbours the k-NN forest is hundreds of small trees: the single
+    # linkage between them is completed in stages; the result is the same as completing
+    # it all at once, and exact.
+    rng = np.random.default_rng(2)
+    centres = rng.uniform(0, 60, size=(40, 3))
+    points = (centres[:, None, :] + rng.normal(scale=0.5, size=(40, 20, 3))).reshape(-1, 3)
+    args = (points, 10, 4, n_neighbors, 1)
+    radius, components, reached = _radius_for_count(*args)
+    assert (radius, reached) == _radius_for_count(*args, complete_all=True)[::2]
+    assert same_partition(components, _radius_for_count(*args, complete_all=True)[1])
+    labels, used = euclidean_clustering(points, n_clusters=10, n_neighbors=n_neighbors)
+    assert used == radius and labels.max() + 1 == 10
+    assert same_partition(labels, reference_labels(points, radius, 4))
 
 
 def test_unreachable_count_after_partial_completion():
