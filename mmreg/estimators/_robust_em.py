@@ -424,10 +424,7 @@ def _gather_static_world(models, root, d, sigma_floor, share, min_motion):
     if static < 0:
         return none
     models = models.take(np.arange(len(root)))
-    for name in ("rotations", "translations", "sigmas", "squared_error"):
-        getattr(models, name)[survivors] = getattr(sub_models, name)
-    for name, value in vars(sub_models.moments).items():
-        getattr(models.moments, name)[survivors] = value
+    models.put(survivors, sub_models)
     remap = np.arange(len(root))
     remap[survivors] = survivors[sub_root]
     return int(survivors[static]), models, remap[root], n_merges, survivors[slow]

@@ -83,6 +83,28 @@ class ClusterModels:
             self.squared_error[index],
         )
 
+    def put(self, index, other):
+        """Overwrite the entries ``index`` with ``other``'s, in place."""
+        for name in ("rotations", "translations", "sigmas", "squared_error"):
+            getattr(self, name)[index] = getattr(other, name)
+        for name, value in vars(other.moments).items():
+            getattr(self.moments, name)[index] = value
+
+
+def _merge_into(models, target, group, d, sigma_floor):
+    """Refit ``models[target]`` on the union of the clusters ``group``, in place.
+
+    The union's noise scale pools the members' scales by size (each was measured on its
+    own residuals; the joint motion's residuals would also count how the motions differ).
+    """
+    merged = models.moments.take(group[:1])
+    for member in group[1:]:
+        merged = merged + models.moments.take([member])
+    refit = _models_from_moments(merged, d, sigma_floor)
+    sizes = models.moments.size[group].astype(float)
+    refit.sigmas = np.sqrt(np.sum(sizes * models.sigmas[group] ** 2) / max(sizes.sum(), 1))[None]
+    models.put(target, refit.take(0))
+
 
 def _models_from_moments(moments, d, sigma_floor):
     rotations, translations = moments.fit()
@@ -480,10 +502,7 @@ def merge_adjacent(models, pairs, d, sigma_floor):
             (size_keep * models.sigmas[keep] ** 2 + size_gone * models.sigmas[gone] ** 2)
             / np.maximum(size_keep + size_gone, 1)
         )
-        for name in ("rotations", "translations", "sigmas", "squared_error"):
-            getattr(models, name)[keep] = getattr(refit, name)
-        for name, value in vars(merged).items():
-            getattr(models.moments, name)[keep] = value
+        models.put(keep, refit)
         parent[gone] = keep
         n_merges += len(keep)
         remap = np.arange(k)
@@ -564,20 +583,8 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
     np.minimum.at(first, component, np.arange(k))
     root = first[component]
     models = models.take(np.arange(k))  # a copy: merged roots are overwritten
-    sizes = models.moments.size.astype(float)
     for target in np.unique(root[root != np.arange(k)]):
-        group = np.flatnonzero(root == target)
-        merged = models.moments.take(group[:1])
-        for member in group[1:]:
-            merged = merged + models.moments.take([member])
-        refit = _models_from_moments(merged, d, sigma_floor)
-        refit.sigmas = np.sqrt(
-            np.sum(sizes[group] * models.sigmas[group] ** 2) / max(sizes[group].sum(), 1)
-        )[None]
-        for name in ("rotations", "translations", "sigmas", "squared_error"):
-            getattr(models, name)[target] = getattr(refit, name)[0]
-        for name, value in vars(merged).items():
-            getattr(models.moments, name)[target] = value[0]
+        _merge_into(models, target, np.flatnonzero(root == target), d, sigma_floor)
     return root, models, int(np.count_nonzero(root != np.arange(k)))
 
 
@@ -627,19 +634,7 @@ def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
     if not len(joined):
         return static, root, models, 0, slow
     models = models.take(np.arange(k))  # a copy: the static world's entry is overwritten
-    group = np.concatenate([[static], joined])
-    merged = models.moments.take(group[:1])
-    for j in joined:
-        merged = merged + models.moments.take([j])
-    refit = _models_from_moments(merged, d, sigma_floor)
-    # The static world's noise: the scales of its pieces pooled by size.
-    refit.sigmas = np.sqrt(
-        np.sum(sizes[group] * models.sigmas[group] ** 2) / max(sizes[group].sum(), 1)
-    )[None]
-    for name in ("rotations", "translations", "sigmas", "squared_error"):
-        getattr(models, name)[static] = getattr(refit, name)[0]
-    for name, value in vars(merged).items():
-        getattr(models.moments, name)[static] = value[0]
+    _merge_into(models, static, np.concatenate([[static], joined]), d, sigma_floor)
     root[joined] = static
     return static, root, models, len(joined), slow
 
