@@ -13,6 +13,7 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
 __all__ = [
+    "NeighbourTable",
     "connected_labels",
     "minimum_spanning_forest",
     "nearest_in_other_component",
@@ -23,6 +24,43 @@ __all__ = [
 # Bounding boxes prune the searches between components up to this many components; each
 # costs a pass over the points.
 _BOX_PRUNING_MAX_COMPONENTS = 64
+
+
+class NeighbourTable:
+    """The ``k`` nearest neighbours of every point, computed once and widened on demand.
+
+    Loops that ask the same points about their neighbourhood every iteration (with
+    labels that change) query this table instead of building k-d trees anew.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    k : int, default=16
+        Neighbours kept for every point (itself included, first).
+    """
+
+    def __init__(self, points, k=16):
+        self.points = np.asarray(points, dtype=float)
+        self.tree = cKDTree(self.points)
+        self.k = min(k, len(self.points))
+        if self.k:
+            distance, index = self.tree.query(self.points, k=self.k)
+            self.distance = distance.reshape(len(self.points), self.k)
+            self.index = index.reshape(len(self.points), self.k)
+        else:
+            self.distance = np.empty((0, 0))
+            self.index = np.empty((0, 0), dtype=np.intp)
+
+    def __len__(self):
+        return len(self.points)
+
+    def nearest(self, rows, k):
+        """Distances and indices of the ``k`` nearest neighbours of ``rows``, sorted."""
+        k = min(k, len(self.points))
+        if k <= self.k:
+            return self.distance[rows, :k], self.index[rows, :k]
+        distance, index = self.tree.query(self.points[rows], k=k)
+        return distance.reshape(len(rows), k), index.reshape(len(rows), k)
 
 
 def radius_graph(points, radius, *, tree=None):

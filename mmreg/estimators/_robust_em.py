@@ -33,6 +33,7 @@ from sklearn.utils import check_random_state
 
 from mmreg._gate import ClusterGate
 from mmreg._likelihood import morton_order, single_threaded_blas
+from mmreg._neighbors import NeighbourTable
 from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
 from mmreg.estimators._robust_steps import (
     adjacent_pairs,
@@ -203,6 +204,7 @@ def robust_multi_model_em(
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
     spacing = _sampling_spacing(a) if run["boundary_layers"] else None
+    neighbours = NeighbourTable(a) if run["boundary_layers"] else None
     history = []
     converged = False
     n_iter = 0
@@ -259,7 +261,9 @@ def robust_multi_model_em(
             # 5. Dissolve layers of flow that bled along another cluster's boundary.
             bled = []
             if run["boundary_layers"]:
-                bled = boundary_layers(a, members, n_clusters, spacing, exempt=static)
+                bled = boundary_layers(
+                    a, members, n_clusters, spacing, exempt=static, neighbours=neighbours
+                )
                 members[np.isin(members, bled)] = -1
             # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
             counts = np.bincount(members[members >= 0], minlength=n_clusters)
@@ -328,7 +332,9 @@ def robust_multi_model_em(
                 kept = np.append(kept, -1)
             if run["boundary_layers"] and found:
                 # A proposal along another cluster's boundary is bled flow too.
-                layers = boundary_layers(a, new, len(kept), spacing, exempt=static)
+                layers = boundary_layers(
+                    a, new, len(kept), spacing, exempt=static, neighbours=neighbours
+                )
                 first_new = len(models.sigmas)
                 found = [f for k, f in enumerate(found) if first_new + k not in layers]
                 new[np.isin(new, layers[layers >= first_new])] = -1
@@ -377,7 +383,9 @@ def robust_multi_model_em(
             )
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
         if run["boundary_layers"]:
-            bled = boundary_layers(a, labels, n_clusters, spacing, exempt=static)
+            bled = boundary_layers(
+                a, labels, n_clusters, spacing, exempt=static, neighbours=neighbours
+            )
             labels = np.where(np.isin(labels, bled), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
     labels, kept = drop_small_clusters(labels, counts, min_cluster_size)

@@ -26,7 +26,7 @@ from scipy.stats import binom, chi2
 from mmreg._connectivity import tau_components
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg._moments import Moments, group_moments
-from mmreg._neighbors import nearest_in_other_component
+from mmreg._neighbors import NeighbourTable
 
 __all__ = [
     "ClusterModels",
@@ -698,7 +698,9 @@ def _concatenate_moments(first, second):
     )
 
 
-def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0, exempt=-1):
+def boundary_layers(
+    points, labels, n_clusters, spacing, *, thickness=3.0, exempt=-1, neighbours=None
+):
     """Clusters that are all boundary: a layer along another cluster, no interior.
 
     Scene-flow networks smear the flow of one surface over the pixels next to it, so
@@ -719,37 +721,61 @@ def boundary_layers(points, labels, n_clusters, spacing, *, thickness=3.0, exemp
         Distance from each point to its nearest neighbour among all points.
     thickness : float, default=3.0
     exempt : int, default=-1
-        A cluster that is never a layer (the static world); its points are not queried,
-        which saves most of the work on a street scene.
+        A cluster that is never a layer (the static world); its points are not queried.
+    neighbours : NeighbourTable, default=None
+        The nearest neighbours of ``points``; built here if None. A loop that calls this
+        every iteration builds it once.
 
     Returns
     -------
     clusters : ndarray
         Indices of the clusters that are boundary layers.
+
+    Notes
+    -----
+    The median test only needs to know, for each point, whether a point of another
+    cluster lies within its cluster's limit ``thickness * typical spacing``. The nearest
+    ``k`` neighbours settle that for most points: a foreign one among them within the
+    limit says yes; none, with the ``k``-th beyond the limit, says no. Only clusters that
+    the settled points leave undecided widen ``k`` for their unsettled points, so the
+    answer is exact without a k-d tree per call.
     """
     rows = np.flatnonzero(labels >= 0)
     if n_clusters < 2 or not len(rows):
         return np.empty(0, dtype=np.intp)
+    if neighbours is None:
+        neighbours = NeighbourTable(points)
     own = labels[rows]
-    bound = thickness * float(np.max(spacing[rows]))
-    queried = np.flatnonzero(own != exempt)
-    source, target, distance = nearest_in_other_component(
-        points[rows], own, max_distance=bound, sources=queried
-    )
-    gap = np.full(len(rows), np.inf)
-    gap[source] = distance
-    order = np.lexsort((gap, own))
     counts = np.bincount(own, minlength=n_clusters)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     full = np.flatnonzero(counts > 0)
-    median_gap = np.full(n_clusters, np.inf)
-    median_gap[full] = gap[order][starts[full] + (counts[full] - 1) // 2]
     typical = np.zeros(n_clusters)
     spacing_order = np.lexsort((spacing[rows], own))
     typical[full] = spacing[rows][spacing_order][starts[full] + (counts[full] - 1) // 2]
-    layers = median_gap <= thickness * typical
+    limit = thickness * typical
+    # A cluster is a layer when its median gap is within its limit: when at least this
+    # many of its points have a foreign point within the limit.
+    needed = (counts - 1) // 2 + 1
+    candidate = counts > 0
     if exempt >= 0:
-        layers[exempt] = False
+        candidate[exempt] = False
+    near = np.zeros(n_clusters, dtype=np.intp)
+    pending = rows[candidate[own]]
+    k = neighbours.k
+    while len(pending):
+        cluster = labels[pending]
+        reach = limit[cluster]
+        distance, index = neighbours.nearest(pending, k)
+        others = labels[index]
+        foreign = (others >= 0) & (others != cluster[:, None]) & (distance <= reach[:, None])
+        settled_near = foreign.any(axis=1)
+        open_ = ~settled_near & (distance[:, -1] <= reach) & (k < len(neighbours))
+        near += np.bincount(cluster[settled_near], minlength=n_clusters)
+        still_open = np.bincount(cluster[open_], minlength=n_clusters)
+        undecided = (near < needed) & (near + still_open >= needed)
+        pending = pending[open_ & undecided[cluster]]
+        k *= 4
+    layers = candidate & (near >= needed)
     return np.flatnonzero(layers)
 
 
