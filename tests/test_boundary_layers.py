@@ -1,0 +1,72 @@
+"""boundary_layers against a plain reading of its definition (all pairwise distances)."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.distance import cdist
+
+from mmreg._neighbors import NeighbourTable
+from mmreg.estimators._robust_steps import boundary_layers
+
+
+def reference_layers(points, labels, n_clusters, spacing, thickness, exempt):
+    layers = []
+    distance = cdist(points, points)
+    for cluster in range(n_clusters):
+        mine = labels == cluster
+        others = (labels >= 0) & ~mine
+        if cluster == exempt or not mine.any():
+            continue
+        gaps = (
+            distance[np.ix_(mine, others)].min(axis=1)
+            if others.any()
+            else np.full(mine.sum(), np.inf)
+        )
+        # The lower median, as the step takes it.
+        median_gap = np.sort(gaps)[(mine.sum() - 1) // 2]
+        typical = np.sort(spacing[mine])[(mine.sum() - 1) // 2]
+        if median_gap <= thickness * typical:
+            layers.append(cluster)
+    return np.array(layers, dtype=np.intp)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 300),
+    n_clusters=st.integers(2, 7),
+    gridded=st.booleans(),
+    exempt=st.integers(-1, 6),
+    thickness=st.sampled_from([0.5, 1.5, 3.0, 6.0]),
+)
+def test_boundary_layers_match_the_definition(seed, n, n_clusters, gridded, exempt, thickness):
+    exempt = exempt if exempt < n_clusters else -1
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(n, 3)) * rng.uniform(0.1, 5.0)
+    if gridded:
+        # Ties and duplicate points, as on a sampled grid.
+        points = np.round(points, 1)
+    labels = rng.integers(-1, n_clusters, size=n)
+    # Spatially coherent clusters too, so that some are layers and some are not.
+    half = points[:, 0] > np.median(points[:, 0])
+    labels[half] = rng.integers(-1, n_clusters)
+    spacing = NeighbourTable(points, k=2).distance[:, -1]
+    # A table narrower than the default makes the widening path run.
+    table = NeighbourTable(points, k=int(rng.integers(1, 6)))
+    got = boundary_layers(
+        points, labels, n_clusters, spacing, thickness=thickness, exempt=exempt, neighbours=table
+    )
+    expected = reference_layers(points, labels, n_clusters, spacing, thickness, exempt)
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_a_layer_along_a_surface_is_found_and_an_object_beside_it_is_not():
+    # A 20 x 20 grid (cluster 0), a one-row band along its edge with another motion
+    # (cluster 1), and a 6 x 6 patch 5 spacings away (cluster 2).
+    grid = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), -1).reshape(-1, 2)
+    band = np.column_stack([np.arange(20.0), np.full(20, 20.0)])
+    patch = np.stack(np.meshgrid(np.arange(6.0), np.arange(6.0)), -1).reshape(-1, 2) + [26.0, 0]
+    points = np.vstack([grid, band, patch])
+    labels = np.repeat([0, 1, 2], [len(grid), len(band), len(patch)])
+    spacing = NeighbourTable(points, k=2).distance[:, -1]
+    np.testing.assert_array_equal(boundary_layers(points, labels, 3, spacing), [1])
