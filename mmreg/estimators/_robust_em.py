@@ -70,6 +70,9 @@ ROBUST_STEPS = (
 # most correspondences are unexplained (initial clusters that mix several motions), an
 # outlier prior above one half would make itself true.
 _MAX_OUTLIER_WEIGHT = 0.5
+# A moving object's noise scale is at most this fraction of its motion (the proposals'
+# prior, see propose_clusters).
+_MAX_NOISE_RATIO = 0.1
 
 
 @dataclass
@@ -212,6 +215,7 @@ def robust_multi_model_em(
     noise_scale = None
     growth = 0.0
     static = -1
+    reference = None  # the static world's motion, once there is one
 
     def fit(labels, n_clusters):
         return trimmed_fit(
@@ -223,6 +227,8 @@ def robust_multi_model_em(
             noise_scale,
             confidence=confidence_trim,
             per_cluster=sweep,
+            max_noise_ratio=_MAX_NOISE_RATIO if sweep else None,
+            reference=reference,
         )
 
     with single_threaded_blas():
@@ -262,7 +268,13 @@ def robust_multi_model_em(
             bled = []
             if run["boundary_layers"]:
                 bled = boundary_layers(
-                    a, members, n_clusters, spacing, exempt=static, neighbours=neighbours
+                    a,
+                    members,
+                    n_clusters,
+                    spacing,
+                    exempt=static,
+                    neighbours=neighbours,
+                    ignore_strays=sweep,
                 )
                 members[np.isin(members, bled)] = -1
             # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
@@ -301,6 +313,8 @@ def robust_multi_model_em(
                     noise_scale,
                 )
             outlier_share = np.mean(new < 0)
+            if static >= 0:
+                reference = (models.rotations[static], models.translations[static])
             # 9. New clusters from the unexplained correspondences.
             found = []
             if run["proposals"]:
@@ -327,13 +341,20 @@ def robust_multi_model_em(
                     ),
                     per_cluster=sweep,
                 )
+
             for group in found:
                 new[group] = len(kept)
                 kept = np.append(kept, -1)
             if run["boundary_layers"] and found:
                 # A proposal along another cluster's boundary is bled flow too.
                 layers = boundary_layers(
-                    a, new, len(kept), spacing, exempt=static, neighbours=neighbours
+                    a,
+                    new,
+                    len(kept),
+                    spacing,
+                    exempt=static,
+                    neighbours=neighbours,
+                    ignore_strays=sweep,
                 )
                 first_new = len(models.sigmas)
                 found = [f for k, f in enumerate(found) if first_new + k not in layers]
@@ -353,8 +374,12 @@ def robust_multi_model_em(
             history.append(step)
             if run["range_noise"] and noise_model == "range" and len(models.sigmas):
                 growth, noise_scale = _range_noise(a, b, new, models, sigma_floor, sweep)
+            # A change of cluster, not of number: compacting renumbers the clusters.
+            before = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
+            after = np.full(n, -1)
+            after[new >= 0] = kept[new[new >= 0]]
+            n_changed = int(np.count_nonzero(before != after))
             new, n_clusters = _compact_initial(new)
-            n_changed = int(np.count_nonzero(new != labels)) if len(new) == len(labels) else n
             step["changed"] = n_changed
             if verbose:
                 print(", ".join(f"{key} {value:g}" for key, value in step.items()))
@@ -365,6 +390,7 @@ def robust_multi_model_em(
     # Final clean-up: one more merge, the static world gathered, no boundary layer and
     # no cluster below m_min; numbered by size. With max_iter=0 the initial clusters are
     # returned as given (the paper's contract).
+
     if n_iter and n_clusters:
         inliers, models = fit(labels, n_clusters)
         root = np.arange(n_clusters)
@@ -384,7 +410,13 @@ def robust_multi_model_em(
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
         if run["boundary_layers"]:
             bled = boundary_layers(
-                a, labels, n_clusters, spacing, exempt=static, neighbours=neighbours
+                a,
+                labels,
+                n_clusters,
+                spacing,
+                exempt=static,
+                neighbours=neighbours,
+                ignore_strays=sweep,
             )
             labels = np.where(np.isin(labels, bled), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)

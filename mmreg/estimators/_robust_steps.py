@@ -258,6 +258,8 @@ def trimmed_fit(
     confidence=0.999,
     rounds=1,
     per_cluster=True,
+    max_noise_ratio=None,
+    reference=None,
 ):
     """M-step on inliers: fit, drop residuals beyond each cluster's robust scale, refit.
 
@@ -273,6 +275,14 @@ def trimmed_fit(
     ``per_cluster=False``: one scale for all clusters, robust for the trimming and pooled
     without bias afterwards (:func:`pool_sigmas`), so that a cluster of wrong
     correspondences cannot pass itself off as an object with a large noise of its own.
+
+    ``max_noise_ratio``: a cluster's scale is capped at this fraction of how far its
+    motion carries its points relative to the ``reference`` motion ``(R, t)`` (standing
+    still if None), the prior of :func:`propose_clusters`: a flow network errs in
+    proportion to the motion. An initial cluster that holds two objects (a moving car
+    and a parked one, joined by the initialiser) otherwise fits a motion between them
+    with a noise scale large enough to keep both; capped, its members fall out, and the
+    proposals find each object's own motion.
 
     Returns
     -------
@@ -293,6 +303,9 @@ def trimmed_fit(
         sq = squared_residuals(a, b, labels, models.rotations, models.translations) / g2
         if per_cluster:
             scales, scene = robust_scales(sq, labels, n_clusters, d)
+            if max_noise_ratio is not None:
+                moved = _motion_from(models, reference)
+                scales = np.minimum(scales, np.maximum(scene, max_noise_ratio * moved))
             scales = np.append(np.maximum(scales, sigma_floor), 0.0)  # labels -1 read the 0
             keep = member & (sq <= limit * scales[labels] ** 2)
         else:
@@ -305,6 +318,18 @@ def trimmed_fit(
         return inliers, models
     models.sigmas = np.maximum(models.sigmas, max(scene, sigma_floor))
     return inliers, models
+
+
+def _motion_from(models, reference):
+    """How far each cluster's motion carries its members (RMS) from ``reference``'s
+    ``(R, t)``, or from standing still if None."""
+    k, d = models.translations.shape
+    rotation, translation = (np.eye(d), np.zeros(d)) if reference is None else reference
+    away = models.moments.squared_error(
+        np.broadcast_to(rotation, (k, d, d)), np.broadcast_to(translation, (k, d))
+    )
+    excess = away - models.squared_error
+    return np.sqrt(np.maximum(excess, 0.0) / np.maximum(models.moments.count, 1e-300))
 
 
 def log_uniform_density(a, b):
@@ -536,6 +561,15 @@ def motion_gap(models, reference, clusters):
     return np.sqrt(np.maximum(excess, 0.0) / np.maximum(moments.count, 1e-300))
 
 
+def motion_size(models, clusters, static):
+    """How far each cluster's motion carries its points (RMS) relative to the static
+    world's motion, or, without a static world (-1), relative to standing still."""
+    clusters = np.asarray(clusters, dtype=np.intp)
+    if static >= 0:
+        return motion_gap(models, static, clusters)
+    return _motion_from(models.take(clusters), None)
+
+
 def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolerance=0.2):
     """Merge touching moving clusters whose motions agree within ``tolerance`` of the motion.
 
@@ -546,7 +580,9 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
     clusters (not the ``static`` world) are one object when they touch (points within
     three typical spacings of the moving points) and each one's motion carries the
     other's points, RMS, within ``tolerance`` times the smaller of their motions
-    relative to the static world. Cars in one lane move alike too, but do not touch.
+    relative to the static world (to standing still when there is none: a camera's
+    background split in pieces moves alike too). Cars in one lane move alike too, but
+    do not touch.
 
     Returns
     -------
@@ -558,7 +594,7 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
     """
     k = len(models.sigmas)
     root = np.arange(k)
-    if static < 0 or k < 3:
+    if k < 2 + (static >= 0):
         return root, models, 0
     rows = np.flatnonzero((labels >= 0) & (labels != static))
     if len(rows) < 2:
@@ -572,7 +608,7 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
     if not len(pairs):
         return root, models, 0
     i, j = pairs[:, 0], pairs[:, 1]
-    motion = np.minimum(motion_gap(models, static, i), motion_gap(models, static, j))
+    motion = np.minimum(motion_size(models, i, static), motion_size(models, j, static))
     gap = np.maximum(motion_gap(models, i, j), motion_gap(models, j, i))
     pairs = pairs[gap <= tolerance * motion]
     if not len(pairs):
@@ -586,6 +622,18 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
     for target in np.unique(root[root != np.arange(k)]):
         _merge_into(models, target, np.flatnonzero(root == target), d, sigma_floor)
     return root, models, int(np.count_nonzero(root != np.arange(k)))
+
+
+def _with(models, other):
+    """``models`` followed by ``other``'s clusters."""
+    return ClusterModels(
+        *(
+            np.concatenate([getattr(models, name), getattr(other, name)])
+            for name in ("rotations", "translations", "sigmas")
+        ),
+        _concatenate_moments(models.moments, other.moments),
+        np.concatenate([models.squared_error, other.squared_error]),
+    )
 
 
 def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
@@ -699,7 +747,15 @@ def _concatenate_moments(first, second):
 
 
 def boundary_layers(
-    points, labels, n_clusters, spacing, *, thickness=3.0, exempt=-1, neighbours=None
+    points,
+    labels,
+    n_clusters,
+    spacing,
+    *,
+    thickness=3.0,
+    exempt=-1,
+    neighbours=None,
+    ignore_strays=False,
 ):
     """Clusters that are all boundary: a layer along another cluster, no interior.
 
@@ -725,7 +781,12 @@ def boundary_layers(
     neighbours : NeighbourTable, default=None
         The nearest neighbours of ``points``; built here if None. A loop that calls this
         every iteration builds it once.
-
+    ignore_strays : bool, default=False
+        Whether points of other clusters that are strays (fewer than half of their
+        nearest neighbours in their own cluster) are left out of the gaps. A few
+        members of the static world inside a small object (a pedestrian whose noisy
+        flow fits the static motion at a few points) otherwise make the object look like
+        a layer along them; a layer lies along the body of another cluster.
     Returns
     -------
     clusters : ndarray
@@ -759,6 +820,11 @@ def boundary_layers(
     candidate = counts > 0
     if exempt >= 0:
         candidate[exempt] = False
+    counted = labels.copy()
+    if ignore_strays:
+        others = labels[neighbours.index[:, 1:]]
+        alone = 2 * np.count_nonzero(others == labels[:, None], axis=1) < others.shape[1]
+        counted[alone] = -1
     near = np.zeros(n_clusters, dtype=np.intp)
     pending = rows[candidate[own]]
     k = neighbours.k
@@ -766,7 +832,7 @@ def boundary_layers(
         cluster = labels[pending]
         reach = limit[cluster]
         distance, index = neighbours.nearest(pending, k)
-        others = labels[index]
+        others = counted[index]
         foreign = (others >= 0) & (others != cluster[:, None]) & (distance <= reach[:, None])
         settled_near = foreign.any(axis=1)
         open_ = ~settled_near & (distance[:, -1] <= reach) & (k < len(neighbours))
@@ -817,14 +883,7 @@ def _best_hypothesis(sq, grid, allowed, d, chi2_limit, log_g, n_total, log_outli
 
 def _shares_a_motion(models, proposal, d):
     """The merge test of :func:`merge_adjacent` between the proposal and every cluster."""
-    both = ClusterModels(
-        *(
-            np.concatenate([getattr(models, name), getattr(proposal, name)])
-            for name in ("rotations", "translations", "sigmas")
-        ),
-        _concatenate_moments(models.moments, proposal.moments),
-        np.concatenate([models.squared_error, proposal.squared_error]),
-    )
+    both = _with(models, proposal)
     k = len(models.sigmas)
     pairs = np.column_stack([np.arange(k), np.full(k, k)])
     return bool(np.any(_merge_ratio(both, pairs, d) < 1.0))
