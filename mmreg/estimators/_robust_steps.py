@@ -153,7 +153,16 @@ def range_noise_scale(a, growth):
 
 
 def estimate_range_growth(
-    a, squared, labels, n_clusters, sigma_floor, *, n_grid=25, per_cluster=True
+    a,
+    squared,
+    labels,
+    n_clusters,
+    sigma_floor,
+    *,
+    n_grid=25,
+    per_cluster=True,
+    robust=False,
+    confidence=0.999,
 ):
     """Maximum-likelihood ``growth`` of :func:`range_noise_scale` for the clusters given.
 
@@ -162,7 +171,10 @@ def estimate_range_growth(
     residuals ``squared`` (``r_i^2``, of the clustered correspondences) is maximised
     over 0 and a logarithmic grid of ``n_grid`` values around ``1 / median(||a||^2)``,
     ``sigma_j`` profiled out in closed form; a growth above 0 must raise it by more than
-    the BIC price of one parameter.
+    the BIC price of one parameter. ``robust``: each ``sigma_j`` from the median of its
+    normalised residuals and each residual's cost truncated at the ``confidence``
+    quantile, so that the wrong correspondences a cluster still holds do not decide how
+    the noise grows.
     """
     rows = np.flatnonzero((labels >= 0) & np.isfinite(squared))
     if len(rows) < 2 or n_clusters == 0:
@@ -181,9 +193,20 @@ def estimate_range_growth(
     sizes = np.bincount(j, minlength=n_clusters)
     floor2 = sigma_floor**2
     log_like = np.empty(len(grid))
+    limit = chi2.ppf(confidence, d) if robust else np.inf
     for k, growth in enumerate(grid):
         g2 = (1.0 + growth * range2) ** 2
-        sigma2 = np.bincount(j, weights=squared[rows] / g2, minlength=n_clusters)
+        normalised = squared[rows] / g2
+        if robust:
+            sigma2 = group_median(normalised, j, n_clusters) / chi2.ppf(0.5, d)
+            sigma2 = np.maximum(np.nan_to_num(sigma2), floor2)
+            # Truncated at the inlier quantile: a wrong correspondence costs a constant.
+            fit = np.minimum(normalised / sigma2[j], limit)
+            log_like[k] = -0.5 * (
+                d * np.sum(sizes * np.log(sigma2)) + d * np.sum(np.log(g2)) + np.sum(fit)
+            )
+            continue
+        sigma2 = np.bincount(j, weights=normalised, minlength=n_clusters)
         sigma2 = np.maximum(sigma2 / np.maximum(d * sizes, 1), floor2)
         log_like[k] = -0.5 * d * np.sum(sizes * np.log(sigma2)) - 0.5 * d * np.sum(np.log(g2))
     best = int(np.argmax(log_like))
