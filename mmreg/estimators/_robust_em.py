@@ -111,18 +111,22 @@ def _range_noise(a, b, labels, models, sigma_floor, robust):
     return growth, (range_noise_scale(a, growth) if growth > 0 else None)
 
 
-def _sampling_spacing(points, k=6):
+def _sampling_spacing(points, k=6, neighbours=None):
     """The local sampling spacing at each point: the median nearest-neighbour distance
     of its ``k`` nearest points (itself included).
 
     Smoothed so that a few points that happen to lie close together (random subsampling
     makes such clumps) are not read as a surface of their own, denser than the one
-    around them.
+    around them. ``neighbours`` (a :class:`NeighbourTable` of at least ``k``) saves the
+    query.
     """
     n = len(points)
     if n < 2:
         return np.zeros(n)
-    distance, index = cKDTree(points).query(points, k=min(k, n))
+    if neighbours is not None and neighbours.k >= min(k, n):
+        distance, index = neighbours.distance, neighbours.index[:, : min(k, n)]
+    else:
+        distance, index = cKDTree(points).query(points, k=min(k, n))
     return np.median(distance[:, 1][index], axis=1)
 
 
@@ -181,8 +185,10 @@ def robust_multi_model_em(
         Touching moving clusters whose motions agree within this fraction of their motion
         are one object (:func:`join_moving_pieces`).
     tol : float, default=1e-3
-        Converged when an iteration merges and proposes nothing and changes the label of
-        at most this fraction of the correspondences (0: of none, as Algorithm 1).
+        Converged when an iteration merges nothing and moves at most this fraction of
+        the correspondences to another reported cluster (a proposal's or a joined
+        piece's members count; a move between pieces of the static world does not; 0:
+        none, as Algorithm 1).
     skip_steps : tuple of str, default=()
         Steps of :data:`ROBUST_STEPS` to leave out (ablations).
     sweep : bool, default=False
@@ -217,8 +223,14 @@ def robust_multi_model_em(
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
-    spacing = _sampling_spacing(a) if run["boundary_layers"] else None
     neighbours = NeighbourTable(a) if run["boundary_layers"] else None
+    # The robust default shares the table; the paper-equivalence of the shared-scale
+    # loop keeps its own query (ties among equidistant neighbours may order apart).
+    spacing = (
+        _sampling_spacing(a, neighbours=neighbours if sweep else None)
+        if run["boundary_layers"]
+        else None
+    )
     history = []
     converged = False
     n_iter = 0
@@ -264,7 +276,7 @@ def robust_multi_model_em(
                 pairs = adjacent_pairs(a, inliers, n_clusters, tau)
                 root, models, n_merges = merge_adjacent(models, pairs, d, sigma_floor)
             # 3. The static world: every piece that moves with it, however far.
-            static, models, root, n_static, _ = _gather_static_world(
+            static, models, root, n_static, slow = _gather_static_world(
                 models, root, d, sigma_floor, share, min_motion
             )
             members = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
@@ -291,7 +303,7 @@ def robust_multi_model_em(
             # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
             counts = np.bincount(members[members >= 0], minlength=n_clusters)
             own, kept = drop_small_clusters(members, counts, min_cluster_size)
-            static = _position(kept, static)
+            static_root, static = static, _position(kept, static)
             models = models.take(kept)
             weights = _weights(counts[kept], n)
             # 7. E-step and classification of eq. (7), gated by tau but for the static world.
@@ -385,17 +397,23 @@ def robust_multi_model_em(
             history.append(step)
             if run["range_noise"] and noise_model == "range" and len(models.sigmas):
                 growth, noise_scale = _range_noise(a, b, new, models, sigma_floor, sweep)
-            # A change of cluster, not of number: compacting renumbers the clusters.
-            before = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
-            after = np.full(n, -1)
-            after[new >= 0] = kept[new[new >= 0]]
+            # A change of the clusters reported, not of their numbers (compacting
+            # renumbers them) nor inside the static world (slow pieces are reported
+            # with it, and a network's flow moves points between them for ever).
+            reported = np.arange(n_clusters + 1)
+            reported[-1] = -1
+            if static_root >= 0:
+                reported[slow] = static_root
+            before = reported[np.where(labels >= 0, root[np.maximum(labels, 0)], -1)]
+            after = reported[np.append(kept, -1)[new]]
             n_changed = int(np.count_nonzero(before != after))
             new, n_clusters = _compact_initial(new)
             step["changed"] = n_changed
             if verbose:
                 print(", ".join(f"{key} {value:g}" for key, value in step.items()))
             labels = new
-            if n_changed <= tol * n and not (n_merges or n_static or n_joined or found):
+            # Proposals and joined pieces count by the correspondences they move.
+            if n_changed <= tol * n and not (n_merges or n_static):
                 converged = True
                 break
     # Final clean-up: one more merge, the static world gathered, no boundary layer and

@@ -152,6 +152,9 @@ def range_noise_scale(a, growth):
     return 1.0 + growth * np.einsum("ij,ij->i", a, a)
 
 
+_GROWTH_SAMPLE = 16384
+
+
 def estimate_range_growth(
     a,
     squared,
@@ -179,6 +182,9 @@ def estimate_range_growth(
     rows = np.flatnonzero((labels >= 0) & np.isfinite(squared))
     if len(rows) < 2 or n_clusters == 0:
         return 0.0
+    if robust and len(rows) > _GROWTH_SAMPLE:
+        # One parameter: an even sample of the rows pins it down as well as all of them.
+        rows = rows[:: -(-len(rows) // _GROWTH_SAMPLE)]
     d = a.shape[1]
     range2 = np.einsum("ij,ij->i", a[rows], a[rows])
     typical = float(np.median(range2))
@@ -198,7 +204,10 @@ def estimate_range_growth(
         g2 = (1.0 + growth * range2) ** 2
         normalised = squared[rows] / g2
         if robust:
-            sigma2 = group_median(normalised, j, n_clusters) / chi2.ppf(0.5, d)
+            if n_clusters == 1:  # a selection, not a sort
+                sigma2 = np.array([np.median(normalised)]) / chi2.ppf(0.5, d)
+            else:
+                sigma2 = group_median(normalised, j, n_clusters) / chi2.ppf(0.5, d)
             sigma2 = np.maximum(np.nan_to_num(sigma2), floor2)
             # Truncated at the inlier quantile: a wrong correspondence costs a constant.
             fit = np.minimum(normalised / sigma2[j], limit)
