@@ -70,3 +70,20 @@ def test_a_layer_along_a_surface_is_found_and_an_object_beside_it_is_not():
     labels = np.repeat([0, 1, 2], [len(grid), len(band), len(patch)])
     spacing = NeighbourTable(points, k=2).distance[:, -1]
     np.testing.assert_array_equal(boundary_layers(points, labels, 3, spacing), [1])
+
+
+def test_stray_members_of_another_cluster_inside_an_object_do_not_make_it_a_layer():
+    # A 10 x 10 patch (cluster 1) with five of its points labelled as the static world
+    # (cluster 0), whose body lies 40 spacings away: the object is a layer along the
+    # strays unless strays are ignored.
+    patch = np.stack(np.meshgrid(np.arange(10.0), np.arange(10.0)), -1).reshape(-1, 2)
+    body = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), -1).reshape(-1, 2) + 50.0
+    points = np.vstack([patch, body])
+    labels = np.repeat([1, 0], [len(patch), len(body)])
+    labels[[11, 33, 45, 67, 88]] = 0
+    spacing = NeighbourTable(points, k=2).distance[:, -1]
+    table = NeighbourTable(points)
+    assert 1 in boundary_layers(points, labels, 2, spacing, exempt=0, neighbours=table)
+    assert 1 not in boundary_layers(
+        points, labels, 2, spacing, exempt=0, neighbours=table, ignore_strays=True
+    )
