@@ -235,7 +235,7 @@ def _dask_backend(scheduler, n_workers):
                     threads_per_worker=1,
                     processes=True,
                     dashboard_address=":0",  # a free port: other clusters may run here
-                    silence_logs=logging.ERROR,
+                    silence_logs=logging.CRITICAL,  # a lost worker is a row, not a log
                 )
             )
             scheduler = cluster
