@@ -1,5 +1,6 @@
 """``mmreg run``: process a whole dataset as independent jobs on Dask (resumable)."""
 
+import importlib.util
 import json
 import shutil
 import sys
@@ -171,6 +172,8 @@ def run(args):
     from mmreg import io as mmio
     from mmreg.runner import dataset_jobs, run_dataset
 
+    if importlib.util.find_spec("distributed") is None:
+        raise CLIError("'mmreg run' needs dask.distributed: pip install 'mmreg[dask]'")
     if args.out is None:
         args.out = f"{Path(args.dataset).resolve().name}-mmreg-run"
     out = Path(args.out)
