@@ -73,6 +73,7 @@ def add_arguments(parser):
     parser.add_argument(
         "--n-workers",
         type=_positive_int,
+        metavar="N",
         default=None,
         help="worker processes of the LocalCluster (default: one per core)",
     )
