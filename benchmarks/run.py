@@ -1,7 +1,14 @@
 """Timing and memory benchmarks of mmreg: ``python benchmarks/run.py [--quick]``.
 
-Four sections, each printed as a Markdown table and written as a CSV under
-``benchmarks/results/`` (or ``--out``):
+Five sections, each printed as a Markdown table and written as a CSV under
+``benchmarks/results/`` (or ``--out``); ``--sections`` picks them, by default ``issue21``
+alone (a few minutes; ``--sections all`` runs every one):
+
+``issue21``
+    Every row of issue 21's table (the issue's figure, its goal, the time and peak
+    memory measured now, and the floor at each size: one k-d tree k = 8 k-NN pass with
+    its build, and one pass over the data), each row in a fresh process; see
+    ``benchmarks/issue21.py`` (``issue21.csv`` and ``issue21.md``).
 
 ``paper``
     Paper scale (Section V-A): 22,395 correspondences on 7 objects, Gaussian noise 0.03,
@@ -325,8 +332,8 @@ def main(argv=None):
     parser.add_argument("--out", default=str(HERE / "results"), help="directory for the CSVs")
     parser.add_argument(
         "--sections",
-        default="paper,yardstick,scaling_n,scaling_k",
-        help="comma-separated subset of: paper, yardstick, scaling_n, scaling_k",
+        default="issue21",
+        help="comma-separated subset of: issue21, paper, yardstick, scaling_n, scaling_k; or all",
     )
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -334,11 +341,19 @@ def main(argv=None):
         print(json.dumps(worker(json.loads(args.worker))))
         return
     sections = set(args.sections.split(","))
+    if "all" in sections:
+        sections = {"issue21", "paper", "yardstick", "scaling_n", "scaling_k"}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     info = machine()
     print("Machine: " + ", ".join(f"{key} {value}" for key, value in info.items()))
-    write_csv(out / "machine.csv", [info])
+    if sections - {"issue21"}:  # the machine of the older sections' CSVs
+        write_csv(out / "machine.csv", [info])
+
+    if "issue21" in sections:
+        import issue21
+
+        issue21.main(["--out", str(out)] + ["--quick"] * args.quick)
 
     if sections & {"paper", "yardstick"}:
         scene, init = paper_scene()

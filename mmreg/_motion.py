@@ -24,7 +24,13 @@ residual scale.
 
 import numpy as np
 
-__all__ = ["MOVING_FACTOR", "motion_statistics", "moving_clusters", "static_cluster"]
+__all__ = [
+    "MOVING_FACTOR",
+    "motion_statistics",
+    "moving_clusters",
+    "moving_from_statistics",
+    "static_cluster",
+]
 
 #: A cluster moves when its displacement exceeds this many times its residual scale.
 MOVING_FACTOR = 3.0
@@ -65,7 +71,13 @@ def static_cluster(labels):
 
 def _group_median(values, groups, n_groups):
     """Median of ``values`` within each group ``0..n_groups-1`` (NaN for an empty group)."""
-    order = np.lexsort((values, groups))
+    # Sort by value, then stably by group (radix sort for small integers): the same
+    # order as np.lexsort((values, groups)), about 3x faster on millions of values.
+    by_value = np.argsort(values)
+    keys = groups[by_value]
+    if n_groups <= np.iinfo(np.int16).max:
+        keys = keys.astype(np.int16)
+    order = by_value[np.argsort(keys, kind="stable")]
     counts = np.bincount(groups, minlength=n_groups)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     sorted_values = values[order]
@@ -157,7 +169,9 @@ def motion_statistics(a, b, labels, rotations, translations, static):
     scale = np.where(np.isnan(scale), np.nan, np.maximum(scale, floor))
 
     if 0 <= static < n_clusters:
-        by_static = pa @ rotations[static].T + translations[static]
+        # einsum, not pa @ R.T: OpenBLAS threads make that product of a 3 x 3 matrix
+        # 10-30x slower when the cores are busy.
+        by_static = np.einsum("ij,kj->ik", pa, rotations[static]) + translations[static]
         gap = np.linalg.norm(own - by_static, axis=1)
         displacement = _group_median(gap, group, n_clusters)
         if np.isfinite(displacement[static]):
@@ -211,6 +225,11 @@ def moving_clusters(a, b, labels, rotations, translations, static):
     [False, True]
     """
     displacement, scale = motion_statistics(a, b, labels, rotations, translations, static)
+    return moving_from_statistics(displacement, scale, static)
+
+
+def moving_from_statistics(displacement, scale, static):
+    """:func:`moving_clusters` from the output of :func:`motion_statistics` (one pass)."""
     with np.errstate(invalid="ignore"):
         moving = displacement > MOVING_FACTOR * scale
     moving = np.asarray(moving, dtype=bool) & np.isfinite(displacement) & np.isfinite(scale)

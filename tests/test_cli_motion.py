@@ -111,3 +111,18 @@ def test_bad_shapes():
         moving_clusters(a, np.zeros((3, 3)), np.zeros(4, int), np.eye(3)[None], np.zeros((1, 3)), 0)
     with pytest.raises(ValueError, match="labels go up to 1"):
         moving_clusters(a, a, np.array([0, 1, 0, 1]), np.eye(3)[None], np.zeros((1, 3)), 0)
+
+
+@pytest.mark.parametrize("n_groups", [7, 40_000])  # the int16 radix path and the other
+def test_group_median_is_the_median_of_each_group(n_groups):
+    from mmreg._motion import _group_median
+
+    rng = np.random.default_rng(n_groups)
+    groups = rng.integers(0, n_groups, 60_000)
+    values = rng.integers(0, 50, 60_000).astype(float)  # many ties
+    got = _group_median(values, groups, n_groups + 2)  # the last two groups are empty
+    expected = [
+        np.median(values[groups == g]) if np.any(groups == g) else np.nan
+        for g in range(n_groups + 2)
+    ]
+    np.testing.assert_array_equal(got, expected)

@@ -30,13 +30,13 @@ import warnings
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from mmreg._cli import demo, evaluate, register, view
+from mmreg._cli import dataset, demo, evaluate, register, view
 from mmreg._cli._common import STRAY_WARNINGS, CLIError, one_line, remove_partial, show_warning
 
 __all__ = ["BUILTIN_COMMANDS", "ENTRY_POINT_GROUP", "build_parser", "main"]
 
 ENTRY_POINT_GROUP = "mmreg.commands"
-BUILTIN_COMMANDS = (demo, register, evaluate, view)
+BUILTIN_COMMANDS = (demo, register, evaluate, view, dataset)
 # Exit codes: bad input or usage, and a failure of mmreg itself.
 EXIT_USAGE, EXIT_FAILURE, EXIT_INTERRUPTED = 2, 1, 130
 

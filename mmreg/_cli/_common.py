@@ -8,9 +8,12 @@ A result directory (written by ``mmreg register`` and ``mmreg demo --out``) hold
 * ``summary.csv``: one row per cluster (see :func:`summarize`);
 * ``clusters.ply``: the a-points coloured by cluster, outliers grey;
 * ``result.png``: the picture;
-* ``X.npy``: the input correspondences ``[a | b]`` (for ``mmreg view`` and
-  ``mmreg evaluate``);
-* ``run.json``: the input, the options and the run's numbers.
+* ``X.npy``: the input correspondences ``[a | b]``, only on request (``mmreg register
+  --save-input``) or when there is no input file (``mmreg demo``);
+* ``run.json``: the input, the options and the run's numbers; for an input file, its
+  absolute path and the SHA-256 of its correspondences, from which ``mmreg view`` and
+  ``mmreg evaluate`` read it again when there is no ``X.npy`` (see
+  :func:`read_result_input`).
 
 It is written whole or not at all, and never over anything but an earlier result: every
 file goes to a hidden staging folder beside it first, which then takes the result's
@@ -287,7 +290,7 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     import numpy as np
     import pandas as pd
 
-    from mmreg._motion import motion_statistics, moving_clusters, static_cluster
+    from mmreg._motion import motion_statistics, moving_from_statistics, static_cluster
 
     a, b = X[:, :3], X[:, 3:]
     rotations = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
@@ -295,7 +298,7 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     n_clusters = len(rotations)
     static = static_cluster(labels)
     displacement, scale = motion_statistics(a, b, labels, rotations, translations, static)
-    moving = moving_clusters(a, b, labels, rotations, translations, static)
+    moving = moving_from_statistics(displacement, scale, static)  # moving_clusters' rule
     angles = rotation_angle_deg(rotations)
     clustered = np.flatnonzero(labels >= 0)
     group = labels[clustered]
@@ -575,12 +578,14 @@ def write_result_dir(
     extra_files=None,
     *,
     overwrite=False,
+    save_input=True,
 ):
     """Write a result directory whole: into a staging folder, then put in place at once.
 
     ``out`` is checked again (:func:`check_out`), so a folder the user filled during the
     run is not replaced either. ``extra_files`` maps more file names to their bytes.
-    Errors name ``out``, never the staging folder.
+    ``save_input``: write ``X`` as ``X.npy`` too (else only its a-points, in
+    ``clusters.ply``). Errors name ``out``, never the staging folder.
     """
     import numpy as np
 
@@ -608,7 +613,8 @@ def write_result_dir(
         colors = cluster_colors(labels, background=True)  # as in the picture
         mmio.write_point_cloud(staging / "clusters.ply", X[:, :3], colors=colors)
         (staging / "result.png").write_bytes(png)
-        np.save(staging / "X.npy", X)
+        if save_input:
+            np.save(staging / "X.npy", X)
         (staging / "run.json").write_text(json.dumps(run, indent=2, default=_json_default) + "\n")
         for name, content in dict(extra_files or {}).items():
             (staging / name).write_bytes(content)
@@ -633,6 +639,64 @@ def write_result_dir(
         if staging is not None and staging in _PARTIAL:
             shutil.rmtree(staging, ignore_errors=True)
             _PARTIAL.discard(staging)
+
+
+def correspondences_digest(X):
+    """The SHA-256 (hex) of correspondences as float64 in C order: the same for the same data."""
+    import hashlib
+
+    import numpy as np
+
+    return hashlib.sha256(np.ascontiguousarray(X, dtype=np.float64).data).hexdigest()
+
+
+def input_record(X, input, target=None, flow=None):
+    """What ``run.json`` keeps of an input file to read it again: absolute paths, digest."""
+    paths = {"input": input, "target": target, "flow": flow}
+    record = {f"{name}_path": str(Path(path).resolve()) for name, path in paths.items() if path}
+    return record | {"input_sha256": correspondences_digest(X)}
+
+
+def read_result_input(folder, n, *, required=True):
+    """The correspondences of a result directory: its ``X.npy``, else its input file.
+
+    Without ``X.npy`` the input is read again from the paths in ``run.json`` and must
+    still hold the same correspondences (its SHA-256). Returns None when the result
+    keeps neither and ``required`` is False; otherwise that, a missing, changed or
+    unreadable input, or a length other than ``n`` is a CLIError.
+    """
+    folder = Path(folder)
+    saved = folder / "X.npy"
+    if saved.exists():
+        with reading(saved):
+            X = check_correspondences(load_npy(saved), saved)
+        source = saved
+    else:
+        run = {}
+        if (folder / "run.json").exists():
+            with reading(folder / "run.json"):
+                run = json.loads((folder / "run.json").read_text())
+        if not isinstance(run, dict) or "input_path" not in run:
+            if not required:
+                return None
+            raise CLIError(
+                f"{saved}: no such file, and {folder / 'run.json'} names no input file (is "
+                f"{folder} a result directory?)"
+            )
+        from mmreg import io as mmio
+
+        source, target, flow = (run.get(f"{k}_path") for k in ("input", "target", "flow"))
+        with reading(source, target, flow):
+            X = mmio.read_correspondences(source, target=target, flow=flow)
+        X = check_correspondences(X, source)
+        if correspondences_digest(X) != run.get("input_sha256"):
+            raise CLIError(
+                f"{source}: not the correspondences {folder} was computed from (the file "
+                "changed since); run 'mmreg register' again (--save-input keeps a copy)"
+            )
+    if len(X) != n:
+        raise CLIError(f"{source}: {len(X)} correspondences for {n} labels")
+    return X
 
 
 def _json_default(value):

@@ -10,8 +10,8 @@ from mmreg._cli._common import (
     CLIError,
     check_correspondences,
     check_labels,
-    load_npy,
     load_npz,
+    read_result_input,
     reading,
 )
 
@@ -19,12 +19,13 @@ NAME = "evaluate"
 HELP = "score a result directory against ground-truth labels (and motions)"
 DESCRIPTION = """\
 Score the result directory PRED_DIR (of "mmreg register" or "mmreg demo --out": its
-labels.npy, and motions.json and X.npy for the pose errors) against TRUTH, which is
+labels.npy, and motions.json and its correspondences for the pose errors: its X.npy, else
+the input file named in its run.json) against TRUTH, which is
 
   - a file of labels (.npy, .csv or .txt): the true object of every correspondence, -1
     for outliers; or
   - an .npz with an array "labels" and optionally "X" (the correspondences, else
-    PRED_DIR/X.npy is used), "rotations" (K, 3, 3) and "translations" (K, 3) (the true
+    PRED_DIR's are used), "rotations" (K, 3, 3) and "translations" (K, 3) (the true
     motion of each object, else fitted by Horn's method on the true clusters, as the
     paper does on KITTI) and "outlier_mask" (n,) bool (marks outliers when the labels
     do not).
@@ -102,17 +103,12 @@ def _read_prediction(pred_dir):
     with reading(labels_path):
         labels = mmio.read_labels(labels_path)
     labels = check_labels(labels, len(np.asarray(labels)), labels_path)
-    motions = X = None
-    motions_path, X_path = pred_dir / "motions.json", pred_dir / "X.npy"
+    motions = None
+    motions_path = pred_dir / "motions.json"
     if motions_path.exists():
         with reading(motions_path):
             motions = mmio.read_motions(motions_path)
-    if X_path.exists():
-        with reading(X_path):
-            X = check_correspondences(load_npy(X_path), X_path)
-        if len(X) != len(labels):
-            raise CLIError(f"{X_path}: {len(X)} correspondences for {len(labels)} labels")
-    return labels, motions, X
+    return labels, motions
 
 
 def evaluate(pred_dir, truth_path):
@@ -130,9 +126,11 @@ def evaluate(pred_dir, truth_path):
         translation_error,
     )
 
-    pred, motions, X_pred = _read_prediction(pred_dir)
+    pred, motions = _read_prediction(pred_dir)
     truth, X_true, rotations, translations = _read_truth(truth_path, len(pred))
-    X = X_true if X_true is not None else X_pred
+    X = X_true
+    if X is None and motions is not None:  # only the pose errors need them
+        X = read_result_input(pred_dir, len(pred), required=False)
     true_ids, true_sizes = np.unique(truth[truth >= 0], return_counts=True)
     # Every true object but the largest (the background; np.argmax: the first of ties).
     others = np.delete(true_ids, np.argmax(true_sizes)) if len(true_ids) else true_ids

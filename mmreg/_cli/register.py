@@ -14,6 +14,7 @@ from mmreg._cli._common import (
     check_labels,
     check_out,
     format_table,
+    input_record,
     load_npz,
     plural,
     reading,
@@ -47,8 +48,10 @@ of each a-point in that image).
 Written into --out: labels.npy (cluster of every correspondence, -1 for outliers),
 motions.json (per cluster: label, 4x4 transform with b = R a + t, rotation, translation,
 rotation_angle_deg, sigma, size, moving), summary.csv (one row per cluster), clusters.ply
-(a-points coloured by cluster, outliers grey), result.png, X.npy (the correspondences) and
-run.json (input, options, timings). The directory is written whole or not at all.
+(a-points coloured by cluster, outliers grey), result.png and run.json (input, options,
+timings, and the input's absolute path and SHA-256, from which 'mmreg view' and 'mmreg
+evaluate' read it again); with --save-input also X.npy, a copy of the correspondences.
+The directory is written whole or not at all.
 
 --out must be new, an empty folder, or (with --overwrite) an earlier result, which is
 then replaced as a whole; a folder holding other files is never touched. This is checked
@@ -194,6 +197,12 @@ def add_arguments(parser):
         "--overwrite",
         action="store_true",
         help="replace an earlier result directory at --out (never a folder of other files)",
+    )
+    parser.add_argument(
+        "--save-input",
+        action="store_true",
+        help="also write X.npy, a copy of the correspondences (else 'mmreg view' and "
+        "'evaluate' read INPUT again, which must then stay where it is, unchanged)",
     )
     parser.add_argument(
         "--view",
@@ -375,6 +384,7 @@ def register(
                 run,
                 extra_files,
                 overwrite=getattr(args, "overwrite", False),
+                save_input=getattr(args, "save_input", True),  # no input file: keep X
             )
     return estimator, summary, elapsed, n_initial
 
@@ -407,7 +417,10 @@ def run(args):
         with steps.step(f"reading {args.input}"):
             X = read_input(args)
             init = make_init(args, len(X))
-        estimator, summary, elapsed, _ = register(X, init, args, input_name=args.input, steps=steps)
+        record = input_record(X, args.input, args.target, args.flow)
+        estimator, summary, elapsed, _ = register(
+            X, init, args, input_name=args.input, steps=steps, extra_run=record
+        )
     if not args.quiet:
         moving = summary["moving"].map({True: "yes", False: "no"})
         table = summary.assign(moving=moving.where(~summary["background"], "background"))

@@ -6,11 +6,10 @@ from pathlib import Path
 
 from mmreg._cli._common import (
     CLIError,
-    check_correspondences,
     check_labels,
-    load_npy,
     picture_format,
     plural,
+    read_result_input,
     reading,
     render_picture,
     result_figure,
@@ -21,8 +20,10 @@ NAME = "view"
 HELP = "redraw the picture of a result directory"
 DESCRIPTION = """\
 Redraw the picture of a result directory (of "mmreg register" or "mmreg demo --out") from
-its X.npy, labels.npy and motions.json: the a-points coloured by cluster (the largest, the
-background, in sand; outliers small and grey) and an arrow per cluster for its motion.
+its labels.npy, motions.json and correspondences (its X.npy, else the input file named in
+its run.json, which must still hold the same correspondences): the a-points coloured by
+cluster (the largest, the background, in sand; outliers small and grey) and an arrow per
+cluster for its motion.
 Written to --out, by default RESULT_DIR/result.png (replacing it); the format follows the
 extension of --out (.png, .pdf, .svg, .eps, .jpg, ...). An existing --out other than
 RESULT_DIR/result.png is replaced only with --overwrite.
@@ -77,14 +78,14 @@ def run(args):
             raise CLIError(f"{out}: exists; pass --overwrite to replace it")
     if out.is_dir():
         raise CLIError(f"{out}: is a folder; --out names the picture file")
-    paths = {name: folder / name for name in ("X.npy", "labels.npy", "motions.json")}
+    paths = {name: folder / name for name in ("labels.npy", "motions.json")}
     for path in paths.values():
         if not path.exists():
             raise CLIError(f"{path}: no such file (is {folder} a result directory?)")
-    with reading(paths["X.npy"]):
-        X = check_correspondences(load_npy(paths["X.npy"]), paths["X.npy"])
     with reading(paths["labels.npy"]):
-        labels = check_labels(mmio.read_labels(paths["labels.npy"]), len(X), paths["labels.npy"])
+        labels = mmio.read_labels(paths["labels.npy"])
+        labels = check_labels(labels, len(labels), paths["labels.npy"])
+    X = read_result_input(folder, len(labels))
     with reading(paths["motions.json"]):
         motions = mmio.read_motions(paths["motions.json"])
     rotations, translations = motions["rotations"], motions["translations"]

@@ -1,0 +1,381 @@
+"""Run an estimator over a dataset: independent jobs on Dask, resumable, one file per job.
+
+:func:`run_dataset` fits a copy of the estimator on every job of a dataset (see
+:func:`dataset_jobs`) on a Dask cluster through joblib's ``"dask"`` backend (the
+machinery ``paper/`` sweeps with), writes each job's result into ``OUT/jobs/<name>.npz``
+whole or not at all, skips the jobs whose complete result is already there, and ends
+with a summary table, one row per job (``OUT/summary.parquet`` and ``summary.csv``).
+
+Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas``,
+``flow`` (the rigid flow, :attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when
+the estimator reports it) and ``meta``: a JSON string with the job's summary row and the
+fingerprint of (job, estimator) the result belongs to.
+"""
+
+import contextlib
+import hashlib
+import json
+import logging
+import math
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from mmreg._dataset_jobs import (
+    Argoverse2PairJob,
+    CorrespondenceFileJob,
+    FramePairJob,
+    check_jobs,
+    dataset_jobs,
+)
+
+__all__ = [
+    "Argoverse2PairJob",
+    "CorrespondenceFileJob",
+    "FramePairJob",
+    "dataset_jobs",
+    "default_estimator",
+    "read_job_result",
+    "run_dataset",
+]
+
+JOBS_FOLDER = "jobs"
+RESULT_KEYS = ("labels", "rotations", "translations", "sigmas", "flow", "meta")
+# The columns every summary starts with; metrics and estimator-specific numbers follow.
+SUMMARY_COLUMNS = [
+    "job",
+    "status",
+    "n",
+    "n_clusters",
+    "n_moving",
+    "n_outliers",
+    "n_iter",
+    "converged",
+    "load_s",
+    "fit_s",
+    "resumed",
+    "error",
+]
+
+
+def default_estimator():
+    """The estimator for LiDAR sweeps: ``MultiModelRegistration(variant="sweep", tau=5)``."""
+    from mmreg import MultiModelRegistration
+
+    return MultiModelRegistration(variant="sweep", tau=5.0, random_state=0)
+
+
+def _describe(value):
+    """A stable text of a parameter value (arrays by their bytes, not their repr)."""
+    if isinstance(value, np.ndarray):
+        return f"array{value.shape}{value.dtype}:{hashlib.sha256(value.tobytes()).hexdigest()}"
+    if hasattr(value, "get_params"):
+        params = value.get_params(deep=False)
+        inner = ",".join(f"{k}={_describe(params[k])}" for k in sorted(params))
+        return f"{type(value).__module__}.{type(value).__qualname__}({inner})"
+    return repr(value)
+
+
+def _fingerprint(job, estimator):
+    """What a result depends on: the job and the estimator with its parameters."""
+    from mmreg import __version__
+
+    text = "\n".join([repr(job), _describe(estimator), __version__])
+    return hashlib.sha256(text.encode("utf-8", "surrogateescape")).hexdigest()[:16]
+
+
+def _metrics(X, estimator, data):
+    """The job's scores against its truth (empty without truth)."""
+    from mmreg.metrics import iou_score, objects_found, scene_flow_metrics
+
+    truth = data.get("labels_true")
+    scores = {}
+    if truth is not None:
+        scored = truth >= 0  # negative: unknown (Argoverse 2) or outlier: not scored
+        pred = estimator.labels_[scored]
+        truth = truth[scored]
+        ids, sizes = np.unique(truth, return_counts=True)
+        scores["iou"] = float(iou_score(truth, pred)) if len(truth) else math.nan
+        scores["objects_found"] = objects_found(truth, pred) if len(ids) else math.nan
+        # Every object but the largest (the static world of a street): the moving ones.
+        others = np.delete(ids, np.argmax(sizes)) if len(ids) else ids
+        scores["moving_objects"] = len(others)
+        scores["moving_found"] = (
+            objects_found(truth, pred, objects=others) if len(others) else math.nan
+        )
+    flow_true = data.get("flow_true")
+    if flow_true is not None:
+        keep = (
+            np.ones(len(X), bool) if data.get("labels_true") is None else data["labels_true"] >= 0
+        )
+        # A point with no fitted motion (NaN: no cluster at all) counts as not moving.
+        flow = np.nan_to_num(estimator.flow_[keep], nan=0.0)
+        if keep.any():
+            found = scene_flow_metrics(flow_true[keep], flow)
+            scores.update({name.lower(): value for name, value in found.items()})
+    return scores
+
+
+def _process(job, estimator):
+    """Load and fit one job (runs on a worker); ``(name, arrays or None, row)``.
+
+    An error of the job becomes its row (status ``"error"``), so one bad input does not
+    stop a dataset; KeyboardInterrupt and the like still propagate.
+    """
+    from sklearn.base import clone
+
+    row = {"job": job.name, "status": "error"}
+    try:
+        start = time.perf_counter()
+        data = job.load()
+        X = np.asarray(data["X"], dtype=float)
+        row["n"] = len(X)
+        row["load_s"] = time.perf_counter() - start
+        model = clone(estimator)
+        start = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model.fit(X)
+        row["fit_s"] = time.perf_counter() - start
+        moving = getattr(model, "moving_", None)
+        row.update(
+            status="done",
+            n_clusters=int(model.n_clusters_),
+            n_moving=int(np.sum(moving)) if moving is not None else -1,
+            n_outliers=int(np.sum(model.labels_ < 0)),
+            n_iter=int(getattr(model, "n_iter_", -1)),
+            converged=bool(getattr(model, "converged_", True)),
+            warnings=" | ".join(sorted({str(w.message) for w in caught}))[:500],
+        )
+        row.update(_metrics(X, model, data))
+    except Exception as error:  # one job's failure is its row, not the run's end
+        row["error"] = f"{type(error).__name__}: {' '.join(str(error).split())}"[:1000]
+        return job.name, None, row
+    arrays = {
+        "labels": model.labels_.astype(np.int64),
+        "rotations": np.asarray(model.rotations_, dtype=float),
+        "translations": np.asarray(model.translations_, dtype=float),
+        "sigmas": np.asarray(model.sigmas_, dtype=float),
+        "flow": np.asarray(model.flow_, dtype=float),
+    }
+    if moving is not None:
+        arrays["moving"] = np.asarray(moving, dtype=bool)
+    return job.name, arrays, row
+
+
+def _result_path(out, name):
+    return Path(out) / JOBS_FOLDER / f"{name}.npz"
+
+
+def read_job_result(path, fingerprint=None):
+    """The arrays and summary row of a job's result file, or None if it is not complete.
+
+    A file that is truncated, corrupt (every member's CRC-32 is checked), lacks an array,
+    or belongs to another job or estimator (``fingerprint``) is not a result.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``OUT/jobs/<name>.npz``.
+    fingerprint : str, default=None
+        The fingerprint the result must carry; None accepts any.
+
+    Returns
+    -------
+    result : tuple (arrays, row) or None
+        ``arrays``: ``{name: ndarray}``; ``row``: the job's summary row (a dict).
+    """
+    from mmreg import io as mmio
+
+    try:
+        arrays = mmio._load_npz(path)
+        meta = json.loads(str(arrays.pop("meta")))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if any(key not in arrays for key in RESULT_KEYS if key != "meta"):
+        return None
+    if fingerprint is not None and meta.get("fingerprint") != fingerprint:
+        return None
+    return arrays, meta["row"]
+
+
+def _write_result(path, arrays, row, fingerprint):
+    from mmreg import io as mmio
+
+    meta = json.dumps({"fingerprint": fingerprint, "row": row}, default=_json_value)
+    with mmio.atomic_write(path) as handle:
+        np.savez(handle, **arrays, meta=np.array(meta))
+
+
+def _json_value(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+@contextlib.contextmanager
+def _dask_backend(scheduler, n_workers):
+    """joblib's dask backend on the cluster at ``scheduler``, or on a new LocalCluster."""
+    import joblib
+
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as exc:  # pragma: no cover - depends on the installation
+        raise ImportError("run_dataset needs dask.distributed: pip install 'mmreg[dask]'") from exc
+    with contextlib.ExitStack() as stack:
+        if scheduler is None:
+            # One thread per worker: the fits use numpy/scipy, which hold the GIL between
+            # the vectorised calls, so processes (not threads) run jobs side by side.
+            cluster = stack.enter_context(
+                LocalCluster(
+                    n_workers=n_workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=":0",  # a free port: other clusters may run here
+                    silence_logs=logging.CRITICAL,  # a lost worker is a row, not a log
+                )
+            )
+            scheduler = cluster
+        stack.enter_context(Client(scheduler))
+        stack.enter_context(joblib.parallel_config(backend="dask"))
+        yield
+
+
+def _write_table(frame, out):
+    from mmreg import io as mmio
+
+    with mmio.atomic_write(Path(out) / "summary.parquet") as handle:
+        frame.to_parquet(handle, index=False)
+    with mmio.atomic_write(Path(out) / "summary.csv", "w") as handle:
+        frame.to_csv(handle, index=False, float_format="%.6g")
+
+
+def run_dataset(
+    jobs,
+    estimator=None,
+    out="mmreg-run",
+    *,
+    scheduler=None,
+    n_workers=None,
+    overwrite=False,
+    progress=True,
+):
+    """Fit ``estimator`` on every job of a dataset on Dask; resumable, one file per job.
+
+    Every job runs as one task of joblib's ``"dask"`` backend (``paper/`` runs its
+    sweeps the same way): it loads its input on the worker, fits a clone of
+    ``estimator`` and sends back the arrays, which are written to ``out/jobs/<name>.npz``
+    (to a temporary file in that folder, then :func:`os.replace`: whole or not at all).
+    A job whose complete result for this estimator is already there is not run again,
+    so an interrupted run resumes where it stopped. A job that raises becomes a row
+    with ``status="error"`` and its message; the others go on, and the next run retries
+    it.
+
+    Parameters
+    ----------
+    jobs : str, path-like or list of jobs
+        A dataset folder (its jobs: :func:`dataset_jobs`), or jobs: objects with a
+        unique ``name`` (a file name) and a ``load()`` returning ``{"X": (n, 6)}``, plus
+        ``"labels_true"`` (n,) and ``"flow_true"`` (n, 3) when the truth is known. They
+        are pickled to the workers, which must be able to read the files they name.
+    estimator : estimator, default=None
+        A scikit-learn style estimator (``fit(X)``, ``labels_``, ``rotations_``,
+        ``translations_``, ``sigmas_``, ``flow_``); None: :func:`default_estimator`.
+    out : str or path-like, default="mmreg-run"
+        Folder of the results (created): ``jobs/<name>.npz``, ``summary.parquet``,
+        ``summary.csv``.
+    scheduler : str, default=None
+        Address of a running Dask scheduler (``"tcp://host:8786"``); None starts a
+        :class:`distributed.LocalCluster` for the run.
+    n_workers : int, default=None
+        Worker processes of the LocalCluster (None: one per core); ignored with
+        ``scheduler``.
+    overwrite : bool, default=False
+        Run every job again, replacing the results found in ``out``.
+    progress : bool, default=True
+        A tqdm progress bar over the jobs on stderr.
+
+    Returns
+    -------
+    summary : pandas.DataFrame
+        One row per job, in the jobs' order: ``job``, ``status`` (``"done"`` or
+        ``"error"``), ``n`` (correspondences), ``n_clusters``, ``n_moving``,
+        ``n_outliers``, ``n_iter``, ``converged``, ``load_s``, ``fit_s`` (seconds, on the
+        worker), ``resumed`` (read from an earlier run), ``error``, ``warnings``, and with
+        the truth ``iou``, ``objects_found``, ``moving_objects``, ``moving_found``
+        (objects besides the largest found with IoU >= 0.5), ``epe3d``, ``acc3ds``,
+        ``acc3dr``, ``outliers3d`` (of the rigid flow, :func:`mmreg.metrics.
+        scene_flow_metrics`). Points with a negative true label are not scored.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from distributed import LocalCluster
+    >>> from mmreg import MultiModelRegistration
+    >>> from mmreg.runner import run_dataset
+    >>> rng = np.random.default_rng(0)
+    >>> frame = rng.uniform(-1, 1, (200, 3))
+    >>> with tempfile.TemporaryDirectory() as folder, LocalCluster(
+    ...         n_workers=1, processes=False, dashboard_address=":0") as cluster:
+    ...     for k in range(3):
+    ...         np.save(Path(folder) / f"frame{k}.npy", frame + [0.1 * k, 0, 0])
+    ...     est = MultiModelRegistration(init=np.zeros(200, int), variant="paper")
+    ...     summary = run_dataset(folder, est, Path(folder) / "out",
+    ...                           scheduler=cluster.scheduler_address, progress=False)
+    >>> summary[["job", "status", "n", "n_clusters"]].values.tolist()
+    [['frame0__frame1', 'done', 200, 1], ['frame1__frame2', 'done', 200, 1]]
+    """
+    import joblib
+    import pandas as pd
+    from tqdm import tqdm
+
+    if isinstance(jobs, (str, Path)):
+        jobs = dataset_jobs(jobs)
+    jobs = check_jobs(jobs)
+    if estimator is None:
+        estimator = default_estimator()
+    if not hasattr(estimator, "fit"):
+        raise TypeError(f"estimator must have a fit method; got {type(estimator).__name__}.")
+    if n_workers is not None and (not isinstance(n_workers, int) or n_workers < 1):
+        raise ValueError(f"n_workers must be a positive integer or None; got {n_workers!r}.")
+    out = Path(out)
+    (out / JOBS_FOLDER).mkdir(parents=True, exist_ok=True)
+    fingerprints = {job.name: _fingerprint(job, estimator) for job in jobs}
+    rows, todo = {}, []
+    for job in jobs:
+        found = None
+        if not overwrite:
+            found = read_job_result(_result_path(out, job.name), fingerprints[job.name])
+        if found is None:
+            todo.append(job)
+        else:
+            rows[job.name] = found[1] | {"resumed": True}
+    bar = tqdm(
+        total=len(jobs),
+        initial=len(rows),
+        disable=not progress,
+        file=sys.stderr,
+        unit="job",
+        desc="mmreg run",
+    )
+    with bar:
+        if todo:
+            with _dask_backend(scheduler, n_workers):
+                tasks = (joblib.delayed(_process)(job, estimator) for job in todo)
+                parallel = joblib.Parallel(n_jobs=-1, return_as="generator_unordered")
+                for name, arrays, row in parallel(tasks):
+                    if arrays is not None:
+                        _write_result(_result_path(out, name), arrays, row, fingerprints[name])
+                    rows[name] = row | {"resumed": False}
+                    bar.update(1)
+    frame = pd.DataFrame([rows[job.name] for job in jobs])
+    columns = SUMMARY_COLUMNS + [c for c in frame.columns if c not in SUMMARY_COLUMNS]
+    frame = frame.reindex(columns=columns)
+    frame["error"] = frame["error"].astype(object).where(frame["error"].notna(), "")
+    _write_table(frame, out)
+    return frame
