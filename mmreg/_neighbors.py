@@ -8,6 +8,7 @@ listing the pairs, for the large ``tau`` of the gate.
 """
 
 import numpy as np
+from joblib import cpu_count
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
@@ -16,6 +17,7 @@ __all__ = [
     "connected_labels",
     "minimum_spanning_forest",
     "nearest_in_other_component",
+    "query_workers",
     "radius_graph",
     "shortest_edges_between_components",
 ]
@@ -23,6 +25,31 @@ __all__ = [
 # Bounding boxes prune the searches between components up to this many components; each
 # costs a pass over the points.
 _BOX_PRUNING_MAX_COMPONENTS = 64
+
+
+def query_workers(n_jobs):
+    """scipy's ``workers`` for k-d tree queries, from scikit-learn's ``n_jobs``.
+
+    None means one thread (mmreg never takes every core unasked: the caller may already
+    run several fits at once), -1 every core, ``-k`` all but ``k - 1`` of them (scipy
+    itself accepts only -1 and positive counts).
+
+    Examples
+    --------
+    >>> from mmreg._neighbors import query_workers
+    >>> query_workers(None), query_workers(3)
+    (1, 3)
+    """
+    if n_jobs is None:
+        return 1
+    n_jobs = int(n_jobs)
+    if n_jobs == 0:
+        raise ValueError(
+            "n_jobs=0 means no thread at all; use None or 1 for one, -1 for every core."
+        )
+    if n_jobs < 0:
+        return max(1, cpu_count() + 1 + n_jobs)
+    return n_jobs
 
 
 def radius_graph(points, radius, *, tree=None):
