@@ -514,8 +514,9 @@ class MultiModelRegistration(BaseRegistration):
 
         Each row goes to the cluster of largest weighted likelihood
         ``pi_j phi_j(b | a)`` (eq. 7) among the clusters whose fitted a-points lie within
-        ``tau`` of its a-point; ``-1`` if there is none or, with the robust variant, if
-        the fitted outlier component explains it better.
+        ``tau`` of its a-point (and, ``variant="sweep"``, the static world, which the
+        E-step admits everywhere); ``-1`` if there is none or, with the robust variants,
+        if the fitted outlier component explains it better.
 
         Parameters
         ----------
