@@ -46,12 +46,24 @@ class ClusterGate:
     ungated : array-like of int, default=()
         Clusters admitted everywhere, however far (the static world, which is one
         object however far apart its visible pieces lie).
+    workers : int, default=1
+        Threads of the KD-tree queries of the exact test (``-1``: every core).
     """
 
     def __init__(
-        self, points, labels, n_clusters, radius, *, centers=None, spread=None, ungated=()
+        self,
+        points,
+        labels,
+        n_clusters,
+        radius,
+        *,
+        centers=None,
+        spread=None,
+        ungated=(),
+        workers=1,
     ):
         self.radius = radius
+        self.workers = workers
         self.n_clusters = n_clusters
         self._ungated = np.zeros(n_clusters, dtype=bool)
         self._ungated[np.asarray(ungated, dtype=np.intp)] = True
@@ -188,7 +200,7 @@ class ClusterGate:
             tree = self._trees[cluster] = cKDTree(members)
         # The tree reports only distances below the bound; one ulp more keeps "== radius".
         bound = np.nextafter(self.radius, np.inf)
-        dist, _ = tree.query(query, k=1, distance_upper_bound=bound)
+        dist, _ = tree.query(query, k=1, distance_upper_bound=bound, workers=self.workers)
         return dist <= self.radius
 
     def _cluster_points(self, cluster):

@@ -8,6 +8,7 @@ listing the pairs, for the large ``tau`` of the gate.
 """
 
 import numpy as np
+from joblib import cpu_count
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
@@ -17,6 +18,7 @@ __all__ = [
     "connected_labels",
     "minimum_spanning_forest",
     "nearest_in_other_component",
+    "query_workers",
     "radius_graph",
     "shortest_edges_between_components",
 ]
@@ -37,14 +39,17 @@ class NeighbourTable:
     points : ndarray of shape (n, d)
     k : int, default=16
         Neighbours kept for every point (itself included, first).
+    workers : int, default=1
+        Threads for the k-d tree queries (see :func:`query_workers`).
     """
 
-    def __init__(self, points, k=16):
+    def __init__(self, points, k=16, workers=1):
         self.points = np.asarray(points, dtype=float)
         self.tree = cKDTree(self.points)
+        self.workers = workers
         self.k = min(k, len(self.points))
         if self.k:
-            distance, index = self.tree.query(self.points, k=self.k)
+            distance, index = self.tree.query(self.points, k=self.k, workers=workers)
             self.distance = distance.reshape(len(self.points), self.k)
             self.index = index.reshape(len(self.points), self.k)
         else:
@@ -59,8 +64,33 @@ class NeighbourTable:
         k = min(k, len(self.points))
         if k <= self.k:
             return self.distance[rows, :k], self.index[rows, :k]
-        distance, index = self.tree.query(self.points[rows], k=k)
+        distance, index = self.tree.query(self.points[rows], k=k, workers=self.workers)
         return distance.reshape(len(rows), k), index.reshape(len(rows), k)
+
+
+def query_workers(n_jobs):
+    """scipy's ``workers`` for k-d tree queries, from scikit-learn's ``n_jobs``.
+
+    None means one thread (mmreg never takes every core unasked: the caller may already
+    run several fits at once), -1 every core, ``-k`` all but ``k - 1`` of them (scipy
+    itself accepts only -1 and positive counts).
+
+    Examples
+    --------
+    >>> from mmreg._neighbors import query_workers
+    >>> query_workers(None), query_workers(3)
+    (1, 3)
+    """
+    if n_jobs is None:
+        return 1
+    n_jobs = int(n_jobs)
+    if n_jobs == 0:
+        raise ValueError(
+            "n_jobs=0 means no thread at all; use None or 1 for one, -1 for every core."
+        )
+    if n_jobs < 0:
+        return max(1, cpu_count() + 1 + n_jobs)
+    return n_jobs
 
 
 def radius_graph(points, radius, *, tree=None):

@@ -356,8 +356,27 @@ def test_n_jobs_reaches_the_initialiser_and_the_estimator(tmp_path, pairs, capsy
     assert code == 0, err
     run = json.loads((out / "run.json").read_text())
     assert run["n_jobs"] == 2
-    if "n_jobs" in MultiModelRegistration().get_params():
-        assert run["estimator"]["n_jobs"] == 2
+    assert run["estimator"]["n_jobs"] == 2
+    assert MultiModelRegistration().get_params()["n_jobs"] is None  # one thread unless asked
+
+
+def test_register_help_names_n_jobs(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["register", "--help"])
+    assert exit_info.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--n-jobs N_JOBS" in text and "n_jobs; -1: every core" in text
+
+
+def test_verbose_prints_the_iterations_of_the_paper_variant(tmp_path, pairs, capsys):
+    args = ["register", pairs, "--init", tmp_path / "init.npy", "--out", tmp_path / "out"]
+    code, out, err = _run(*args, "--paper", "-v", capsys=capsys)
+    assert code == 0, err
+    lines = [line for line in out.splitlines() if line.startswith("iteration ")]
+    assert lines and lines[0].startswith("iteration 1, clusters ")
+    code, out, err = _run(*args, "--paper", "--overwrite", capsys=capsys)
+    assert code == 0, err
+    assert "iteration " not in out
 
 
 def test_no_stray_warnings_in_normal_use(tmp_path, pairs):

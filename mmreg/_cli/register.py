@@ -184,7 +184,8 @@ def add_arguments(parser):
         "--n-jobs",
         type=_n_jobs,
         default=1,
-        help="threads for the initial clustering and the estimator (-1: every core)",
+        help="threads of the k-d tree queries of the initial clustering and the EM "
+        "(MultiModelRegistration's n_jobs; -1: every core)",
     )
     parser.add_argument(
         "--out",
@@ -303,11 +304,9 @@ def _fit(X, init, args, steps):
         init=labels,
         variant="paper" if args.paper else "robust",
         random_state=args.seed,
+        n_jobs=getattr(args, "n_jobs", None),
         verbose=args.verbose,
     )
-    n_jobs = getattr(args, "n_jobs", None)
-    if n_jobs is not None and "n_jobs" in estimator.get_params():
-        estimator.set_params(n_jobs=n_jobs)
     with steps.step("EM"), reported_warnings():
         estimator.fit(X)
     return estimator, int(labels.max(initial=-1)) + 1

@@ -121,7 +121,13 @@ class NaiveRegistration(BaseRegistration):
         # Zero EM iterations: the initial clusters, renumbered, with their Horn fits.
         result = multi_model_em(a, b, self.init_labels_, max_iter=0, sigma_floor=self.sigma_floor)
         return self._store_clusters(
-            a, result.labels, result.rotations, result.translations, result.sigmas, result.weights
+            a,
+            b,
+            result.labels,
+            result.rotations,
+            result.translations,
+            result.sigmas,
+            result.weights,
         )
 
     def predict(self, X):

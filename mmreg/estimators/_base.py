@@ -12,8 +12,11 @@ from mmreg._flow import rigid_flow
 from mmreg._gate import ClusterGate
 from mmreg._geometry import degenerate_groups
 from mmreg._likelihood import classify
+from mmreg._mixture import mixture_log_likelihood
+from mmreg._neighbors import query_workers
 from mmreg._validation import split_correspondences
 from mmreg.estimators._em import default_sigma_floor, fit_cluster_models
+from mmreg.estimators._robust_steps import log_uniform_density
 
 __all__ = ["BaseRegistration", "DegenerateInputWarning"]
 
@@ -39,7 +42,9 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
       (an outlier's a-point moves with the cluster of its nearest clustered a-point);
     * :meth:`predict`, which assigns new correspondences to the fitted motions by the
       weighted likelihood of eq. (7), gated by the distance ``tau`` to the fitted
-      clusters' a-points (``tau=None``: no gate).
+      clusters' a-points (``tau=None``: no gate);
+    * :meth:`score_samples` and :meth:`score`, the log-likelihood of correspondences
+      under the fitted mixture (see :meth:`score_samples`).
 
     Warning: This class should not be used directly. Use derived classes instead.
     """
@@ -70,9 +75,9 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         rotations, translations, sigmas, weights, _ = fit_cluster_models(
             a, b, labels, n_clusters, sigma_floor
         )
-        return self._store_clusters(a, labels, rotations, translations, sigmas, weights)
+        return self._store_clusters(a, b, labels, rotations, translations, sigmas, weights)
 
-    def _store_clusters(self, a, labels, rotations, translations, sigmas, weights):
+    def _store_clusters(self, a, b, labels, rotations, translations, sigmas, weights):
         """Set the fitted attributes shared by every registration estimator."""
         self.labels_ = labels
         self.rotations_ = rotations
@@ -80,9 +85,11 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         self.sigmas_ = sigmas
         self.weights_ = weights
         self.n_clusters_ = len(rotations)
-        self.flow_ = rigid_flow(a, labels, rotations, translations)
-        # predict() measures its gate against these a-points.
+        self.flow_ = rigid_flow(a, labels, rotations, translations, workers=self._workers())
+        # predict() and score() measure their gate against these a-points.
         self._cluster_points = a.copy()
+        # score(): the uniform density of the outlier component, over the displacements.
+        self._log_volume_density = log_uniform_density(a, b)
         self._warn_if_degenerate(a, labels, self.n_clusters_)
         return self
 
@@ -108,6 +115,99 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         """The distance gate used by :meth:`predict`; None means no gate."""
         return getattr(self, "tau", None)
 
+    def _workers(self):
+        """Threads of the KD-tree queries: the estimator's ``n_jobs``, if it has one."""
+        return query_workers(getattr(self, "n_jobs", None))
+
+    def _fitted_gate(self):
+        """The gate of eq. (7) around the fitted clusters, for new correspondences."""
+        return ClusterGate(
+            self._cluster_points,
+            self.labels_,
+            self.n_clusters_,
+            self._gate_radius(),
+            workers=self._workers(),
+        )
+
+    def _noise_scale(self, a):
+        """Each correspondence's relative noise scale ``g_i`` (None: all 1)."""
+        return None
+
+    def _log_outlier_density(self):
+        """``log(pi_0 / V)`` of the outlier component that completes the fitted mixture.
+
+        ``pi_0`` is the share of the correspondences labelled -1 in the fit (at least
+        ``1 / n``), so that with the clusters' weights ``pi_j = |H_j| / n`` it sums to
+        one; ``V`` is the volume of the bounding box of the fitted displacements
+        ``b - a`` (:func:`~mmreg.estimators._robust_steps.log_uniform_density`).
+        """
+        n = len(self.labels_)
+        share = max(float(np.mean(self.labels_ < 0)), 1.0 / max(n, 1))
+        return float(np.log(share)) + self._log_volume_density
+
+    def score_samples(self, X):
+        """Log-likelihood of each correspondence under the fitted mixture.
+
+        The fitted model of ``b`` given ``a``: cluster ``j`` with weight ``pi_j``
+        (``weights_``) moves ``a`` to ``R_j a + t_j`` with isotropic Gaussian noise
+        ``sigma_j`` (``sigmas_``), and a uniform outlier component of weight ``pi_0``
+        (the share of ``labels_ == -1``, at least ``1 / n``) spreads ``b - a`` over the
+        bounding box (volume ``V``) of the fitted displacements. So
+
+        ``log p(b | a) = log(sum_{j admitted} pi_j N(b; R_j a + t_j, sigma_j^2 I) + pi_0 / V)``
+
+        where a cluster is *admitted* as the E-step of eq. (7) admits it: when one of
+        its fitted a-points lies within ``tau`` of ``a`` (every cluster if the estimator
+        has no ``tau`` or ``tau=None``). A correspondence far from every cluster is
+        explained by the outlier component alone. The density is per unit volume of
+        ``b``, in the units of the points, as :meth:`GaussianMixture.score_samples
+        <sklearn.mixture.GaussianMixture.score_samples>` returns it.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, 2 * d)
+            Stacked correspondences ``[a | b]``, fitted or new.
+
+        Returns
+        -------
+        log_likelihood : ndarray of shape (n_samples,)
+        """
+        check_is_fitted(self, "labels_")
+        _, a, b = self._validate_correspondences(X, reset=False)
+        return mixture_log_likelihood(
+            a,
+            b,
+            self.rotations_,
+            self.translations_,
+            self.sigmas_,
+            self.weights_,
+            self._fitted_gate(),
+            self._log_outlier_density(),
+            self._noise_scale(a),
+        )
+
+    def score(self, X, y=None):
+        """Mean log-likelihood per correspondence under the fitted mixture.
+
+        The mean of :meth:`score_samples`, as :meth:`GaussianMixture.score
+        <sklearn.mixture.GaussianMixture.score>`: larger is better, so that
+        :class:`~sklearn.model_selection.GridSearchCV` can choose parameters without
+        labels. Scores of one scene are comparable between estimators and parameters;
+        scores of scenes in other units are not (a density per unit volume).
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, 2 * d)
+            Stacked correspondences ``[a | b]``, fitted or new (held out).
+        y : Ignored
+            Not used, present for API consistency.
+
+        Returns
+        -------
+        log_likelihood : float
+        """
+        return float(np.mean(self.score_samples(X)))
+
     def predict(self, X):
         """Assign correspondences to the fitted motions.
 
@@ -126,11 +226,14 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         """
         check_is_fitted(self, "labels_")
         _, a, b = self._validate_correspondences(X, reset=False)
-        gate = ClusterGate(
-            self._cluster_points, self.labels_, self.n_clusters_, self._gate_radius()
-        )
         return classify(
-            a, b, self.rotations_, self.translations_, self.sigmas_, self.weights_, gate
+            a,
+            b,
+            self.rotations_,
+            self.translations_,
+            self.sigmas_,
+            self.weights_,
+            self._fitted_gate(),
         )
 
     def __sklearn_tags__(self):

@@ -192,8 +192,29 @@ def _compact(labels, n_clusters):
     return rank[labels], int(np.count_nonzero(present)), present
 
 
+def _print_iteration(iteration, labels, n_kept, n_dropped, settled):
+    """One line of ``verbose`` output, in the robust variant's format."""
+    step = {
+        "iteration": iteration,
+        "clusters": int(np.count_nonzero(np.bincount(labels[labels >= 0], minlength=n_kept))),
+        "dropped": int(n_dropped),
+        "outliers": int(np.count_nonzero(labels < 0)),
+        "changed": int(np.count_nonzero(~settled)),
+    }
+    print(", ".join(f"{key} {value:g}" for key, value in step.items()))
+
+
 def multi_model_em(
-    a, b, init_labels, *, tau=1.5, min_cluster_size=4, max_iter=10, sigma_floor=None
+    a,
+    b,
+    init_labels,
+    *,
+    tau=1.5,
+    min_cluster_size=4,
+    max_iter=10,
+    sigma_floor=None,
+    workers=1,
+    verbose=0,
 ):
     """Classification-EM for multi-model registration (Algorithm 1).
 
@@ -211,6 +232,12 @@ def multi_model_em(
         ``T``. Iteration stops early once an M-step leaves every assignment unchanged.
     sigma_floor : float, default=None
         Smallest noise scale; None uses :func:`default_sigma_floor`.
+    workers : int, default=1
+        Threads of the KD-tree queries of the gate (``-1``: every core).
+    verbose : int, default=0
+        Print one line per iteration: the clusters after it, those dropped below
+        ``min_cluster_size``, the correspondences in no cluster and those that changed
+        cluster (the format of the robust variant's lines).
 
     Returns
     -------
@@ -267,7 +294,13 @@ def multi_model_em(
             # Lines 8-9 and 15-18: E-step and classification M-step, gated by d_cluster <= tau
             # measured against the clusters as they were when the poses were fitted.
             gate = ClusterGate(
-                a, own, len(kept), tau, centers=fitted.centroids[kept], spread=fitted.spread
+                a,
+                own,
+                len(kept),
+                tau,
+                centers=fitted.centroids[kept],
+                spread=fitted.spread,
+                workers=workers,
             )
             new = classify(
                 a,
@@ -286,6 +319,8 @@ def multi_model_em(
             )
             new_in_old_ids = np.append(kept, -1)[new]
             settled = new_in_old_ids == labels
+            if verbose:
+                _print_iteration(n_iter, new, len(kept), n_clusters - len(kept), settled)
             if settled.all():
                 converged = True
                 break

@@ -25,11 +25,23 @@ from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["MultiModelRegistration", "ScaleWarning"]
 
+# Fitted attributes of the robust variants only.
+_ROBUST_ATTRIBUTES = (
+    "log_outlier_density_",
+    "noise_growth_",
+    "static_cluster_",
+    "moving_",
+)
+
 # Points sampled to estimate the spacing of the a-points for the units check.
 _SPACING_SAMPLE = 2000
 # A gate of fewer than this many nearest-neighbour distances lets a cluster grow by a
 # point or two per iteration and merges nothing: the units of tau are probably wrong.
 _MIN_GATE_SPACINGS = 4.0
+# A gate longer than the diagonal of the a-points' bounding box joins any two points of
+# the scene: it never separates anything, and objects that move alike merge however
+# far apart they are. Beyond this many diagonals the units of tau are probably wrong.
+_MAX_GATE_DIAMETERS = 1.0
 
 
 class ScaleWarning(UserWarning):
@@ -154,9 +166,16 @@ class MultiModelRegistration(BaseRegistration):
     random_state : int, RandomState instance or None, default=None
         Seeds the proposals' samples, and a clusterer ``init`` whose own
         ``random_state`` is None.
+    n_jobs : int or None, default=None
+        Threads of the k-d tree queries (the gate's, and the initial clustering's when
+        ``init`` is a shortcut or a clusterer whose own ``n_jobs`` is None). None means
+        1, -1 every core, ``-k`` all but ``k - 1`` of them. The results do not depend
+        on it.
     verbose : int, default=0
-        Robust variant: print the clusters, merges, outliers and proposals of every
-        iteration.
+        Print one line per iteration: the clusters, those dropped below
+        ``min_cluster_size``, the outliers (paper variant: the correspondences in no
+        cluster) and the changed labels; the robust variants also the merges and
+        proposals.
 
     Attributes
     ----------
@@ -273,8 +292,15 @@ class MultiModelRegistration(BaseRegistration):
 
     Warnings: a :class:`~sklearn.exceptions.ConvergenceWarning` when ``max_iter`` ends
     the iterations before they settle, and a :class:`ScaleWarning` when ``tau`` is less
-    than four times the median nearest-neighbour distance of the a-points (the points are
-    probably in other units than ``tau``).
+    than four times the median nearest-neighbour distance of the a-points, or more than
+    the diagonal of their bounding box (the gate then never separates anything); the
+    points are probably in other units than ``tau``.
+
+    :meth:`score` is the mean log-likelihood of correspondences under the fitted
+    mixture, the gate of eq. (7) applied as the E-step applies it (the static world of
+    ``variant="sweep"`` admitted everywhere); the robust variants' outlier component
+    is ``log_outlier_density_``, the paper variant's the same uniform density with the
+    weight of its unclustered correspondences (see :meth:`score_samples`).
 
     Each iteration costs one batched SVD for the poses of the clusters that changed and
     scores each spatial block of correspondences only against the clusters whose
@@ -310,6 +336,9 @@ class MultiModelRegistration(BaseRegistration):
     array([1., 0., 0.])
     >>> MultiModelRegistration(init=init, variant="paper").fit(X).n_clusters_
     4
+    >>> one_motion = MultiModelRegistration(init=np.zeros(100, dtype=int), variant="paper")
+    >>> bool(est.score(X) > one_motion.fit(X).score(X))  # mean log-likelihood
+    True
     """
 
     _no_cluster_hint = "Lower min_cluster_size, raise tau, or use a coarser initial clustering."
@@ -330,6 +359,7 @@ class MultiModelRegistration(BaseRegistration):
         "skip_steps": [tuple, list],
         "tol": [Interval(Real, 0, 1, closed="left"), None],
         "random_state": ["random_state"],
+        "n_jobs": [Integral, None],
         "verbose": ["verbose"],
     }
 
@@ -351,6 +381,7 @@ class MultiModelRegistration(BaseRegistration):
         skip_steps=(),
         sigma_floor=None,
         random_state=None,
+        n_jobs=None,
         verbose=0,
     ):
         self.tau = tau
@@ -368,6 +399,7 @@ class MultiModelRegistration(BaseRegistration):
         self.skip_steps = skip_steps
         self.sigma_floor = sigma_floor
         self.random_state = random_state
+        self.n_jobs = n_jobs
         self.verbose = verbose
 
     @_fit_context(prefer_skip_nested_validation=False)
@@ -387,8 +419,14 @@ class MultiModelRegistration(BaseRegistration):
             The fitted estimator.
         """
         X, a, b = self._validate_correspondences(X, reset=True)
-        self._warn_if_tau_below_spacing(a)
-        self.init_labels_ = initial_labels(self.init, X, random_state=self.random_state)
+        self._warn_if_tau_off_scale(a)
+        workers = self._workers()
+        self.init_labels_ = initial_labels(
+            self.init, X, random_state=self.random_state, n_jobs=self.n_jobs
+        )
+        # A refit with another variant must not keep the robust variants' attributes.
+        for name in _ROBUST_ATTRIBUTES:
+            vars(self).pop(name, None)
         if self.variant == "paper":
             result = multi_model_em(
                 a,
@@ -398,6 +436,8 @@ class MultiModelRegistration(BaseRegistration):
                 min_cluster_size=self.min_cluster_size,
                 max_iter=self.max_iter,
                 sigma_floor=self.sigma_floor,
+                workers=workers,
+                verbose=self.verbose,
             )
             self.history_ = []
         else:
@@ -420,6 +460,7 @@ class MultiModelRegistration(BaseRegistration):
                 sweep=self.variant == "sweep",
                 random_state=self.random_state,
                 verbose=self.verbose,
+                workers=workers,
             )
             self.history_ = result.history
             self.log_outlier_density_ = result.log_outlier_density
@@ -427,7 +468,13 @@ class MultiModelRegistration(BaseRegistration):
             self.static_cluster_ = result.static_cluster
             self.moving_ = result.moving
         self._store_clusters(
-            a, result.labels, result.rotations, result.translations, result.sigmas, result.weights
+            a,
+            b,
+            result.labels,
+            result.rotations,
+            result.translations,
+            result.sigmas,
+            result.weights,
         )
         self.outlier_mask_ = self.labels_ < 0
         self.n_iter_ = result.n_iter
@@ -441,7 +488,7 @@ class MultiModelRegistration(BaseRegistration):
             )
         return self
 
-    def _warn_if_tau_below_spacing(self, a):
+    def _warn_if_tau_off_scale(self, a):
         if self.tau is None:
             return
         spacing = median_spacing(a)
@@ -454,14 +501,26 @@ class MultiModelRegistration(BaseRegistration):
                 ScaleWarning,
                 stacklevel=3,
             )
+        # Coincident a-points (diameter 0) get a DegenerateInputWarning instead.
+        diameter = float(np.linalg.norm(np.ptp(a, axis=0)))
+        if 0 < _MAX_GATE_DIAMETERS * diameter < self.tau:
+            warnings.warn(
+                f"tau={self.tau:g} exceeds the diagonal of the a-points' bounding box "
+                f"({diameter:.3g}): the gate of eq. (7) joins any two points of the scene, "
+                "so objects that move alike merge however far apart they are. Are tau and "
+                "the points in the same units? (tau=None turns the gate off on purpose.)",
+                ScaleWarning,
+                stacklevel=3,
+            )
 
     def predict(self, X):
         """Assign correspondences to the fitted motions.
 
         Each row goes to the cluster of largest weighted likelihood
         ``pi_j phi_j(b | a)`` (eq. 7) among the clusters whose fitted a-points lie within
-        ``tau`` of its a-point; ``-1`` if there is none or, with the robust variant, if
-        the fitted outlier component explains it better.
+        ``tau`` of its a-point (and, ``variant="sweep"``, the static world, which the
+        E-step admits everywhere); ``-1`` if there is none or, with the robust variants,
+        if the fitted outlier component explains it better.
 
         Parameters
         ----------
@@ -477,7 +536,7 @@ class MultiModelRegistration(BaseRegistration):
         check_is_fitted(self, "labels_")
         _, a, b = self._validate_correspondences(X, reset=False)
         scale = self._noise_scale(a)
-        gate = ClusterGate(self._cluster_points, self.labels_, self.n_clusters_, self.tau)
+        gate = self._fitted_gate()
         parameters = (self.rotations_, self.translations_, self.sigmas_, self.weights_)
         labels = assign_correspondences(
             a,
@@ -494,3 +553,20 @@ class MultiModelRegistration(BaseRegistration):
         """Each correspondence's relative noise scale ``g_i`` (None: all 1)."""
         growth = getattr(self, "noise_growth_", 0.0)
         return range_noise_scale(a, growth) if growth > 0 else None
+
+    def _fitted_gate(self):
+        """The gate of eq. (7) as the E-step applies it: the static world admitted everywhere."""
+        static = getattr(self, "static_cluster_", -1)
+        return ClusterGate(
+            self._cluster_points,
+            self.labels_,
+            self.n_clusters_,
+            self.tau,
+            ungated=[static] if static >= 0 else [],
+            workers=self._workers(),
+        )
+
+    def _log_outlier_density(self):
+        """The robust variants' fitted outlier component; the paper's: the base class's."""
+        fitted = getattr(self, "log_outlier_density_", None)
+        return super()._log_outlier_density() if fitted is None else fitted

@@ -111,7 +111,7 @@ def _range_noise(a, b, labels, models, sigma_floor, robust):
     return growth, (range_noise_scale(a, growth) if growth > 0 else None)
 
 
-def _sampling_spacing(points, k=6, neighbours=None):
+def _sampling_spacing(points, k=6, neighbours=None, workers=1):
     """The local sampling spacing at each point: the median nearest-neighbour distance
     of its ``k`` nearest points (itself included).
 
@@ -126,7 +126,7 @@ def _sampling_spacing(points, k=6, neighbours=None):
     if neighbours is not None and neighbours.k >= min(k, n):
         distance, index = neighbours.distance, neighbours.index[:, : min(k, n)]
     else:
-        distance, index = cKDTree(points).query(points, k=min(k, n))
+        distance, index = cKDTree(points).query(points, k=min(k, n), workers=workers)
     return np.median(distance[:, 1][index], axis=1)
 
 
@@ -154,6 +154,7 @@ def robust_multi_model_em(
     sweep=False,
     random_state=None,
     verbose=0,
+    workers=1,
 ):
     """Classification-EM with outliers, merging, a static world and re-proposal.
 
@@ -201,6 +202,8 @@ def robust_multi_model_em(
         Seeds the proposals' samples.
     verbose : int, default=0
         Print one line per iteration.
+    workers : int, default=1
+        Threads of the larger KD-tree queries (``-1``: every core).
 
     Returns
     -------
@@ -223,11 +226,11 @@ def robust_multi_model_em(
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
-    neighbours = NeighbourTable(a) if run["boundary_layers"] else None
+    neighbours = NeighbourTable(a, workers=workers) if run["boundary_layers"] else None
     # The robust default shares the table; the paper-equivalence of the shared-scale
     # loop keeps its own query (ties among equidistant neighbours may order apart).
     spacing = (
-        _sampling_spacing(a, neighbours=neighbours if sweep else None)
+        _sampling_spacing(a, neighbours=neighbours if sweep else None, workers=workers)
         if run["boundary_layers"]
         else None
     )
@@ -284,7 +287,14 @@ def robust_multi_model_em(
             n_joined = 0
             if join_pieces:
                 joined, models, n_joined = join_moving_pieces(
-                    a, members, models, static, d, sigma_floor, tolerance=motion_tolerance
+                    a,
+                    members,
+                    models,
+                    static,
+                    d,
+                    sigma_floor,
+                    tolerance=motion_tolerance,
+                    workers=workers,
                 )
                 members = np.where(members >= 0, joined[np.maximum(members, 0)], -1)
             # 5. Dissolve layers of flow that bled along another cluster's boundary.
@@ -307,7 +317,9 @@ def robust_multi_model_em(
             models = models.take(kept)
             weights = _weights(counts[kept], n)
             # 7. E-step and classification of eq. (7), gated by tau but for the static world.
-            gate = ClusterGate(a, own, len(kept), tau, ungated=[static] if static >= 0 else [])
+            gate = ClusterGate(
+                a, own, len(kept), tau, ungated=[static] if static >= 0 else [], workers=workers
+            )
             new = assign_correspondences(
                 a,
                 b,
@@ -434,7 +446,14 @@ def robust_multi_model_em(
         labels = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
         if join_pieces:
             joined, models, _ = join_moving_pieces(
-                a, labels, models, static, d, sigma_floor, tolerance=motion_tolerance
+                a,
+                labels,
+                models,
+                static,
+                d,
+                sigma_floor,
+                tolerance=motion_tolerance,
+                workers=workers,
             )
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
         if run["boundary_layers"]:

@@ -602,7 +602,7 @@ def motion_size(models, clusters, static):
     return _motion_from(models.take(clusters), None)
 
 
-def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolerance=0.2):
+def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolerance=0.2, workers=1):
     """Merge touching moving clusters whose motions agree within ``tolerance`` of the motion.
 
     A scene-flow network errs on a moving object in proportion to its motion, and not
@@ -633,7 +633,7 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
         return root, models, 0
     pts, own = points[rows], labels[rows]
     tree = cKDTree(pts)
-    nearest, _ = tree.query(pts, k=2)
+    nearest, _ = tree.query(pts, k=2, workers=workers)
     pairs = tree.query_pairs(3.0 * float(np.median(nearest[:, 1])), output_type="ndarray")
     pairs = own[pairs]
     pairs = np.unique(np.sort(pairs[pairs[:, 0] != pairs[:, 1]], axis=1), axis=0)

@@ -10,6 +10,7 @@ from sklearn.base import _fit_context
 from sklearn.cluster import DBSCAN
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from mmreg._neighbors import query_workers
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 
 __all__ = ["AllOutliersWarning", "DBSCANClustering", "default_eps"]
@@ -55,7 +56,7 @@ def _open3d_available():
     return importlib.util.find_spec("open3d") is not None
 
 
-def _open3d_dbscan(points, eps, min_samples):
+def _open3d_dbscan(points, eps, min_samples, workers=1):
     """Open3D's DBSCAN: labels and core-point mask (neighbours strictly within ``eps``)."""
     # Imported here: Open3D is large and only this backend needs it.
     import open3d as o3d
@@ -65,7 +66,7 @@ def _open3d_dbscan(points, eps, min_samples):
     # Open3D does not report its core points; they are the points with min_samples
     # points (themselves included) at distance < eps, as Open3D counts them.
     k = min(min_samples, len(points))
-    dist, _ = cKDTree(points).query(points, k=k, distance_upper_bound=eps)
+    dist, _ = cKDTree(points).query(points, k=k, distance_upper_bound=eps, workers=workers)
     core = np.isfinite(dist.reshape(len(points), k)[:, -1]) & (k == min_samples)
     return labels.astype(np.intp), core
 
@@ -110,8 +111,9 @@ class DBSCANClustering(PartitionInitializer):
         Open3D was about twice as fast on the paper-sized scenes (see Notes). Open3D is
         imported on first use, which takes about a second once per process.
     n_jobs : int or None, default=None
-        Parallel jobs for the scikit-learn backend's neighbour search; Open3D uses its
-        own threads.
+        Threads of the neighbour searches (the scikit-learn backend's, and the k-d tree
+        queries around either backend); None means 1, -1 every core. Open3D's own
+        clustering uses its own threads.
 
     Attributes
     ----------
@@ -217,7 +219,9 @@ class DBSCANClustering(PartitionInitializer):
         if not np.isfinite(self.eps_) or self.eps_ <= 0:  # e.g. an overflowing spacing
             raise ValueError(f"eps must be a finite positive number; got {self.eps_}.")
         if self.backend_ == "open3d":
-            labels, core = _open3d_dbscan(points, self.eps_, self.min_samples)
+            labels, core = _open3d_dbscan(
+                points, self.eps_, self.min_samples, query_workers(self.n_jobs)
+            )
         else:
             labels, core = _sklearn_dbscan(points, self.eps_, self.min_samples, self.n_jobs)
         # Every point the backend clustered is a core point or within eps of one.
@@ -227,7 +231,9 @@ class DBSCANClustering(PartitionInitializer):
         self._core_labels = labels[core]
         border = np.flatnonzero((labels >= 0) & ~core)
         if len(border):
-            _, nearest = cKDTree(self._core_points).query(points[border], k=1)
+            _, nearest = cKDTree(self._core_points).query(
+                points[border], k=1, workers=query_workers(self.n_jobs)
+            )
             labels[border] = self._core_labels[nearest]
         self.labels_, self.n_clusters_ = number_by_first_point(labels)
         self._core_labels = self.labels_[core]
@@ -246,7 +252,10 @@ class DBSCANClustering(PartitionInitializer):
         if not len(self._core_points):
             return out
         tree = cKDTree(self._core_points)
-        dist, idx = tree.query(points, k=1, distance_upper_bound=np.nextafter(self.eps_, np.inf))
+        bound = np.nextafter(self.eps_, np.inf)
+        dist, idx = tree.query(
+            points, k=1, distance_upper_bound=bound, workers=query_workers(self.n_jobs)
+        )
         near = np.isfinite(dist)
         out[near] = self._core_labels[idx[near]]
         return out

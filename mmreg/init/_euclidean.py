@@ -33,6 +33,7 @@ from mmreg._neighbors import (
     connected_labels,
     minimum_spanning_forest,
     nearest_in_other_component,
+    query_workers,
 )
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 
@@ -925,7 +926,7 @@ def euclidean_clustering(
     elif n <= 1:
         radius, components = 0.0, np.zeros(n, dtype=np.intp)
     else:
-        workers = 1 if n_jobs is None else n_jobs
+        workers = query_workers(n_jobs)
         radius, components, reached = _radius_for_count(
             points, n_clusters, min_cluster_size, n_neighbors, workers
         )
@@ -974,7 +975,8 @@ class EuclideanClustering(PartitionInitializer):
         linkage is built. The clusters are exact whatever its value; it trades the cost
         of the k-NN graph against that of the edges the graph misses.
     n_jobs : int or None, default=None
-        Threads for the k-NN queries; None means 1 and -1 all processors.
+        Threads for the k-NN queries; None means 1, -1 every core and ``-k`` all but
+        ``k - 1`` of them.
 
     Attributes
     ----------
@@ -1087,7 +1089,10 @@ class EuclideanClustering(PartitionInitializer):
         if not len(self._clustered_points):
             return out
         tree = cKDTree(self._clustered_points)
-        dist, idx = tree.query(points, k=1, distance_upper_bound=np.nextafter(self.radius_, np.inf))
+        bound = np.nextafter(self.radius_, np.inf)
+        dist, idx = tree.query(
+            points, k=1, distance_upper_bound=bound, workers=query_workers(self.n_jobs)
+        )
         near = np.isfinite(dist)
         out[near] = self.labels_[self.labels_ >= 0][idx[near]]
         return out

@@ -26,7 +26,7 @@ INIT_SHORTCUTS = ("euclidean", "dbscan")
 INIT_CONSTRAINT = [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"]
 
 
-def initial_labels(init, X, *, random_state=None):
+def initial_labels(init, X, *, random_state=None, n_jobs=None):
     """Initial clusters of the correspondences ``X = [a | b]``.
 
     Parameters
@@ -41,6 +41,10 @@ def initial_labels(init, X, *, random_state=None):
     random_state : int, RandomState instance or None
         Given to a cloned clusterer whose own ``random_state`` is None, so that the
         registration estimator's seed makes the whole fit reproducible.
+    n_jobs : int or None, default=None
+        Given, likewise, to a cloned clusterer whose own ``n_jobs`` is None (the
+        shortcuts included): the registration estimator's threads for its neighbour
+        queries.
 
     Returns
     -------
@@ -60,8 +64,14 @@ def initial_labels(init, X, *, random_state=None):
             raise TypeError(f"init must be an instance, not the class {init.__name__}.")
         clusterer = clone(init)
         params = clusterer.get_params(deep=False) if hasattr(clusterer, "get_params") else {}
-        if random_state is not None and "random_state" in params and params["random_state"] is None:
-            clusterer.set_params(random_state=random_state)
+        inherited = {"random_state": random_state, "n_jobs": n_jobs}
+        inherited = {
+            name: value
+            for name, value in inherited.items()
+            if value is not None and name in params and params[name] is None
+        }
+        if inherited:
+            clusterer.set_params(**inherited)
         data = X if isinstance(clusterer, BaseInitializer) else X[:, : n_columns // 2]
         return check_labels(clusterer.fit_predict(data), n, name="labels from init")
     if isinstance(init, (list, tuple, np.ndarray)) or hasattr(init, "__array__"):
