@@ -418,6 +418,7 @@ def robust_multi_model_em(
                 reported[slow] = static_root
             before = reported[np.where(labels >= 0, root[np.maximum(labels, 0)], -1)]
             after = reported[np.append(kept, -1)[new]]
+            after[(new >= 0) & (np.append(kept, -1)[new] < 0)] = -2  # a proposal's
             n_changed = int(np.count_nonzero(before != after))
             new, n_clusters = _compact_initial(new)
             step["changed"] = n_changed
