@@ -130,6 +130,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     flow_ : ndarray of shape (n_samples, 3)
         Scene flow of every point of the first sweep; an outlier moves with the cluster
         of its nearest clustered point.
+    sigmas_ : ndarray of shape (n_clusters_,)
+        The estimator's noise scale of each cluster's correspondences.
+    outlier_mask_ : ndarray of shape (n_samples,)
+        True where ``labels_`` is -1.
+    n_iter_ : int
+        EM iterations of the estimator (last round).
+    converged_ : bool
+        Whether the estimator settled (last round).
     icp_scales_ : ndarray of shape (n_clusters_,)
         Robust point-to-plane residual scale of each cluster on the second sweep (NaN for
         clusters not refined).
@@ -254,12 +262,13 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             self.estimator_, self.n_rounds_ = estimator, 1
             self._store(X[:, :d], labels, rotations, translations, static)
             self.icp_scales_ = np.full(len(rotations), np.nan)
+            self._copy_estimator_state(estimator)
             self.moving_ = moving
             return self
         if X.shape[1] not in (3, 6):
             raise ValueError(
                 "X must be (n, 6) correspondences [a | b] or (n, 3) points of the first "
-                f"sweep; got {X.shape[1]} columns."
+                f"sweep; got X with n_features = {X.shape[1]}."
             )
         sweep = _check_sweep(sweep, 3)
         a = X[:, :3]
@@ -278,9 +287,17 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             labels, estimator, rotations, translations, scales, static = self._raw(a, context)
         self.estimator_ = estimator
         self.icp_scales_ = scales
+        self._copy_estimator_state(estimator)
         self._store(a, labels, rotations, translations, static)
         self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
         return self
+
+    def _copy_estimator_state(self, estimator):
+        n_clusters = len(estimator.rotations_)
+        self.sigmas_ = np.asarray(getattr(estimator, "sigmas_", np.full(n_clusters, np.nan)))
+        self.outlier_mask_ = np.asarray(estimator.labels_) < 0
+        self.n_iter_ = getattr(estimator, "n_iter_", 0)
+        self.converged_ = getattr(estimator, "converged_", True)
 
     def _store(self, a, labels, rotations, translations, static):
         self.labels_ = labels
