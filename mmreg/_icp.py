@@ -287,7 +287,17 @@ def multi_body_icp(
     if not n_clusters or not len(members):
         return ICPResult(rotations, translations, scales, n_matched, inlier_share, 0, True)
     sizes = np.bincount(group, minlength=n_clusters)
+    every_point, every_group = points, group
+    # A cluster whose step fell below ``tol`` is done: later iterations leave its points
+    # out (hypothesis tests run hundreds of clusters, most of which settle early).
+    alive = np.ones(n_clusters, dtype=bool)
     for iteration in range(max_iter + 1):
+        final = converged or iteration == max_iter
+        if final or alive.all():
+            points, group = every_point, every_group
+        else:
+            keep = alive[every_group]
+            points, group = every_point[keep], every_group[keep]
         moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
         distance, nearest = tree.query(
             moved, distance_upper_bound=float(gate.max()), workers=workers
@@ -314,7 +324,7 @@ def multi_body_icp(
         inside = np.abs(u) < 1
         weight = np.where(inside, (1 - u**2) ** 2, 0.0)
         inlier_share = np.bincount(g[inside], minlength=n_clusters) / np.maximum(sizes, 1)
-        if converged or iteration == max_iter:  # this pass only measured the final motions
+        if final:  # this pass only measured the final motions
             break
         # Linearise about each cluster's centroid of matched points: a rotation about a
         # far-away origin would couple with the translation and condition badly.
@@ -347,5 +357,6 @@ def multi_body_icp(
         )
         change = np.linalg.norm(step[:, 3:], axis=1) + np.linalg.norm(step[:, :3], axis=1) * spread
         n_iter = iteration + 1
-        converged = bool(np.all(change <= tol))
+        alive &= change > tol
+        converged = not alive.any()
     return ICPResult(rotations, translations, scales, n_matched, inlier_share, n_iter, converged)

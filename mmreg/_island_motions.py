@@ -8,7 +8,9 @@ an island keeps the ego motion unless
 
 * the best alternative explains its points better by more than the price of its six
   parameters (BIC: ``3 log n``), under a robust point-to-plane likelihood whose scale is
-  the ego motion's residual scale on the whole sweep, and
+  three times the ego motion's robust residual scale on the whole sweep,
+* it explains (residual under three scales) a tenth more of the island's points than
+  the ego motion, and a quarter of those the ego motion leaves unexplained, and
 * the alternative moves the island relative to the ego motion by mmreg's own rule
   (:func:`mmreg._motion.moving_clusters`: median displacement over three times the
   residual scale), with the points' feet on the second sweep's surface as the
@@ -35,8 +37,11 @@ _CAP = 3.0
 # The likelihood's scale in units of the ego ICP's robust scale.
 _SCALE_FACTOR = 3.0
 # An alternative must explain (cost under the cap) this much larger a share of the
-# island's points than the ego motion does.
-_MIN_EXPLAINED = 0.2
+# island's points than the ego motion does, and this share of those the ego motion
+# leaves unexplained (an object that moves less than its length still overlaps its
+# old place).
+_MIN_EXPLAINED = 0.1
+_MIN_RECOVERED = 0.25
 # BIC price of an island's own motion: six parameters, (6 / 2) log n.
 _PARAMETERS = 6
 # Starts per island: centroid offsets to this many islands of the second sweep, and this
@@ -274,8 +279,9 @@ def choose_island_motions(
     )
     inliers = np.bincount(index, weights=cost < _CAP**2, minlength=n_pairs)
     static_inliers = np.bincount(groups, weights=static_cost < _CAP**2, minlength=n_islands)
-    explained = inliers - np.repeat(static_inliers, n_starts) >= _MIN_EXPLAINED * np.repeat(
-        sizes, n_starts
+    more = inliers - np.repeat(static_inliers, n_starts)
+    explained = (more >= _MIN_EXPLAINED * np.repeat(sizes, n_starts)) & (
+        more >= _MIN_RECOVERED * np.repeat(sizes - static_inliers, n_starts)
     )
     eligible = (
         valid.ravel()

@@ -187,3 +187,82 @@ def test_cli_target_of_another_size_points_to_sweep(tmp_path, capsys):
     assert main([*argv, "--out", str(tmp_path / "out"), "-q"]) == 2
     assert "--sweep" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_voxel_islands_join_close_points_and_split_far_ones():
+    from scipy.sparse.csgraph import connected_components
+
+    from mmreg._islands import voxel_islands
+    from mmreg._neighbors import radius_graph
+
+    rng = np.random.default_rng(1)
+    blobs = [rng.normal(c, 0.3, (200, 3)) for c in ((0, 0, 0), (8, 0, 0), (0, 9, 3))]
+    points = np.vstack(blobs)
+    cell = 0.5
+    labels, n = voxel_islands(points, cell)
+    # Points within `cell` always share an island; islands are unions of the radius
+    # graph's components at `cell` and never join points 2 sqrt(3) cell apart.
+    _, fine = connected_components(radius_graph(points, cell), directed=False)
+    _, coarse = connected_components(radius_graph(points, 2 * np.sqrt(3) * cell), directed=False)
+    for component in np.unique(fine):
+        assert len(np.unique(labels[fine == component])) == 1
+    for island in range(n):
+        assert len(np.unique(coarse[labels == island])) == 1
+    assert n == len(np.unique(coarse))
+    small, n_small = voxel_islands(points, 0.05, min_size=5)
+    assert np.all((small == -1) | (np.bincount(small[small >= 0])[small] >= 5))
+    assert n_small == len(np.unique(small[small >= 0]))
+
+
+def test_raw_static_world_keeps_the_ego_motion_exactly():
+    a, _, labels, rotations, translations, sweep = make_pair()
+    est = _estimator().fit(a, sweep=sweep)
+    R, t = est.ego_motion_
+    static = est.labels_ == est.static_cluster_
+    # Every static box joins one cluster whose motion is the ego ICP's, not a re-fit.
+    assert np.all(static[labels == 0])
+    np.testing.assert_array_equal(est.rotations_[est.static_cluster_], R)
+    np.testing.assert_array_equal(est.translations_[est.static_cluster_], t)
+    assert np.abs(t - translations[0]).max() < EXACT
+    assert est.moving_.sum() == 2
+
+
+def test_island_that_only_slides_along_its_surface_stays_static():
+    from mmreg._icp import SurfaceNormals
+    from mmreg._island_motions import choose_island_motions
+
+    rng = np.random.default_rng(2)
+    wall = rng.uniform(-2, 2, (400, 3))
+    wall[:, 2] = 0.0  # a plane: sliding within it explains it as well as the ego motion
+    sweep = rng.uniform(-2.5, 2.5, (3000, 3))
+    sweep[:, 2] = 0.0
+    moved_box = rng.uniform(-0.5, 0.5, (300, 3)) + [10.0, 0, 0]
+    moved_box[np.arange(300), rng.integers(0, 3, 300)] = rng.choice([-0.5, 0.5], 300)
+    points = np.vstack([wall, moved_box])
+    groups = np.repeat([0, 1], [400, 300])
+    target_box = rng.uniform(-0.5, 0.5, (2000, 3))
+    target_box[np.arange(2000), rng.integers(0, 3, 2000)] = rng.choice([-0.5, 0.5], 2000)
+    sweep = np.vstack([sweep, target_box + [11.5, 0, 0]])
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(sweep)
+    normals = SurfaceNormals(sweep, tree, 10)
+    ego = (np.eye(3), np.zeros(3))
+    # Start 0: the ego motion; start 1: the wall slid by 0.4 m, the box moved by 1.5 m.
+    rotations = np.broadcast_to(np.eye(3), (4, 3, 3)).copy()
+    translations = np.array([[0, 0, 0], [0.4, 0, 0], [0, 0, 0], [1.5, 0, 0]], dtype=float)
+    resting = cKDTree(points @ ego[0].T + ego[1])
+    moving, pick = choose_island_motions(
+        points,
+        groups,
+        2,
+        ego,
+        (rotations, translations),
+        np.ones((2, 2), dtype=bool),
+        0.005,
+        (sweep, tree, normals),
+        (resting, groups, 0.25),
+        max_distance=1.0,
+    )
+    assert moving.tolist() == [False, True]
+    assert pick[1] == 3

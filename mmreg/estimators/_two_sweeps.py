@@ -33,7 +33,10 @@ __all__ = ["SweepRegistration"]
 _MIN_SWEEP_POINTS = 10
 # Raw mode: points per island in the ICP of its hypotheses, and the translation
 # histogram's bins (in units of max_distance).
-_HYPOTHESIS_POINTS = 256
+_HYPOTHESIS_POINTS = 128
+# Raw mode: Gauss-Newton steps of the hypotheses' ICP (the chosen motions are refined
+# again after the estimator, on up to max_points points).
+_HYPOTHESIS_ITER = 15
 # ICP has converged when no step moves a cluster by more than this share of max_distance.
 _TOL = 1e-4
 _BIN = 0.25
@@ -431,7 +434,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             tree=tree,
             normals=normals,
             max_distance=self.max_distance,
-            max_iter=self.max_icp_iter,
+            max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
             tol=_TOL * self.max_distance,
         )
         motions = (result.rotations, result.translations)
