@@ -4,7 +4,13 @@ import numpy as np
 from sklearn.cluster import KMeans
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from mmreg import MultiModelRegistration, NaiveRegistration, SequentialRANSAC, TLinkage
+from mmreg import (
+    MultiModelRegistration,
+    NaiveRegistration,
+    SequentialRANSAC,
+    SweepRegistration,
+    TLinkage,
+)
 from mmreg.init import (
     DBSCANClustering,
     EuclideanClustering,
@@ -56,6 +62,8 @@ FIXED_ROW_CHECKS = (
 def expected_failed_checks(estimator):
     failures = dict.fromkeys(ODD_COLUMN_CHECKS, ODD_COLUMNS)
     default_em = isinstance(estimator, MultiModelRegistration) and estimator.init == "euclidean"
+    # SweepRegistration without a sweep is its default estimator, the EM from 100 clusters.
+    default_em |= isinstance(estimator, SweepRegistration)
     if default_em or isinstance(estimator, SequentialRANSAC):
         failures["check_clustering"] = BLOBS_ARE_NOT_MOTIONS
     if isinstance(estimator, (PrecomputedLabels, PrecomputedMasks)):
@@ -69,6 +77,7 @@ ROWS = np.arange(30)
 @parametrize_with_checks(
     [
         MultiModelRegistration(),
+        SweepRegistration(),
         MultiModelRegistration(tau=None, init=KMeans(n_clusters=3, n_init=1), random_state=0),
         NaiveRegistration(),
         NaiveRegistration(init=KMeans(n_clusters=3, n_init=1), random_state=0),

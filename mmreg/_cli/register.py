@@ -38,6 +38,13 @@ INPUT is one of
     a-point in the same order: a cloud or an (n, 3) array) or --flow (an (n, 3) .npy of
     scene flow, b = a + flow).
 
+--sweep S names the second sweep as its own points (any size, any order). With
+correspondences (an array, or a cloud with --target or --flow) the robust variant for
+sweeps finds the clusters and each moving cluster's motion is refined on S by robust
+point-to-plane ICP (SweepRegistration); with a cloud INPUT alone the two raw sweeps are
+registered (ego motion, then every island of INPUT aligned to S). --target keeps its
+meaning: one b-point per a-point, in the same order.
+
 --init gives the initial clusters: "euclidean" (Euclidean clustering into --clusters
 clusters, the default), "dbscan", a file of labels (.npy, .csv or .txt: one integer per
 correspondence, negative for none) or a masks file (.npz with arrays "masks", an
@@ -70,6 +77,8 @@ examples:
   mmreg register pairs.npy --out result
   mmreg register frame0.ply --target frame1.ply --init masks.npz --out result
   mmreg register frame0.ply --flow flow.npy --tau 1.0 -v
+  mmreg register sweep0.ply --sweep sweep1.ply --tau 5
+  mmreg register sweep0.ply --flow flow.npy --sweep sweep1.ply --tau 5
 """
 
 
@@ -145,6 +154,13 @@ def add_arguments(parser):
         "--target", metavar="B", help="b-points, one per a-point (.ply/.pcd/.xyz or (n, 3) .npy)"
     )
     source.add_argument("--flow", metavar="F.npy", help="scene flow, (n, 3): b = a + flow")
+    parser.add_argument(
+        "--sweep",
+        metavar="S",
+        help="the second sweep as its own points (.ply/.pcd/.xyz or (m, 3) .npy; any size, "
+        "any order): refines the motions on it, or, with a cloud INPUT alone, registers the "
+        "two raw sweeps",
+    )
     parser.add_argument(
         "--init",
         default="euclidean",
@@ -225,6 +241,16 @@ def read_input(args):
 
     cloud = Path(args.input).suffix.lower() in CLOUD_EXTENSIONS
     other = "--target" if args.target is not None else "--flow" if args.flow is not None else None
+    sweep = getattr(args, "sweep", None)
+    if cloud and other is None and sweep is not None:
+        with reading(args.input):
+            a = mmio.read_point_cloud(args.input)
+        if len(a) < args.min_cluster_size:
+            raise CLIError(
+                f"{args.input}: {len(a)} points, fewer than --min-cluster-size "
+                f"{args.min_cluster_size}: no cluster is possible"
+            )
+        return a
     if cloud and other is None and Path(args.input).exists():
         raise CLIError(
             f"{args.input}: a point cloud holds only the a-points; give the b-points with "
@@ -236,7 +262,16 @@ def read_input(args):
             "this file already holds both a and b"
         )
     with reading(args.input, args.target, args.flow):
-        X = mmio.read_correspondences(args.input, target=args.target, flow=args.flow)
+        try:
+            X = mmio.read_correspondences(args.input, target=args.target, flow=args.flow)
+        except ValueError as error:
+            if args.target is not None and "index-aligned" in str(error):
+                raise CLIError(
+                    f"{args.target}: --target needs one b-point per a-point of {args.input}, "
+                    "in the same order, but the sizes differ; for a second sweep of any "
+                    "size and order use --sweep"
+                ) from None
+            raise
     X = check_correspondences(X, args.input)
     if len(X) < args.min_cluster_size:
         raise CLIError(
@@ -291,25 +326,53 @@ def make_init(args, n):
     return check_labels(labels, n, path)
 
 
-def _fit(X, init, args, steps):
-    from mmreg import MultiModelRegistration
+def read_sweep(args):
+    """The second sweep's points (--sweep), or None."""
+    from mmreg import io as mmio
+
+    sweep = getattr(args, "sweep", None)
+    if sweep is None:
+        return None
+    if args.paper:
+        raise CLIError("--sweep refines the robust variant's motions; drop --paper")
+    with reading(sweep):
+        return mmio.read_point_cloud(sweep)
+
+
+def _fit(X, init, args, steps, sweep=None):
+    from mmreg import MultiModelRegistration, SweepRegistration
     from mmreg.init import initial_labels
 
-    with steps.step("initial clusters"), reading(args.init), reported_warnings():
-        labels = initial_labels(init, X, random_state=args.seed)
+    if X.shape[1] == 6:
+        with steps.step("initial clusters"), reading(args.init), reported_warnings():
+            labels = initial_labels(init, X, random_state=args.seed)
+    else:  # two raw sweeps: the correspondences, and so the clusters, come later
+        labels = init
     estimator = MultiModelRegistration(
         tau=args.tau,
         min_cluster_size=args.min_cluster_size,
         max_iter=args.max_iter,
         init=labels,
-        variant="paper" if args.paper else "robust",
+        variant="paper" if args.paper else "sweep" if sweep is not None else "robust",
         random_state=args.seed,
         n_jobs=getattr(args, "n_jobs", None),
         verbose=args.verbose,
     )
-    with steps.step("EM"), reported_warnings():
-        estimator.fit(X)
-    return estimator, int(labels.max(initial=-1)) + 1
+    if sweep is not None:
+        estimator = SweepRegistration(estimator, random_state=args.seed)
+    with steps.step("EM" if sweep is None else "EM and ICP on --sweep"), reported_warnings():
+        estimator.fit(X, **({} if sweep is None else {"sweep": sweep}))
+    n_initial = int(labels.max(initial=-1)) + 1 if hasattr(labels, "max") else 0
+    return estimator, n_initial
+
+
+def _params(estimator):
+    """The estimator's parameters for run.json (a wrapped estimator's own, beside)."""
+    params = estimator.get_params(deep=False)
+    inner = params.pop("estimator", None)
+    if inner is None:
+        return params
+    return inner.get_params(deep=False) | {"sweep_registration": params}
 
 
 def register(
@@ -323,8 +386,13 @@ def register(
     Returns ``(estimator, summary, fit_seconds, n_initial_clusters)``.
     """
     start = time.perf_counter()
-    estimator, n_initial = _fit(X, init, args, steps)
+    sweep = read_sweep(args)
+    estimator, n_initial = _fit(X, init, args, steps, sweep)
     elapsed = time.perf_counter() - start
+    if sweep is not None:  # what is written: the first sweep and where its points move
+        import numpy as np
+
+        X = np.hstack([X[:, :3], X[:, :3] + estimator.flow_])
     with steps.step("summary and picture"):
         summary = summarize(
             X, estimator.labels_, estimator.rotations_, estimator.translations_, estimator.sigmas_
@@ -356,9 +424,10 @@ def register(
             "input": input_name,
             "target": getattr(args, "target", None),
             "flow": getattr(args, "flow", None),
+            "sweep": getattr(args, "sweep", None),
             "init": str(args.init),
             "initial_clusters": n_initial,
-            "estimator": estimator.get_params(deep=False) | {"init": str(args.init)},
+            "estimator": _params(estimator) | {"init": str(args.init)},
             "n_jobs": getattr(args, "n_jobs", None),
             "n_correspondences": len(X),
             "n_clusters": estimator.n_clusters_,
@@ -403,6 +472,7 @@ TABLE = [
 def default_out(args):
     """``<INPUT's name>-mmreg-<8 hex digits>``: a name no other input (or partner) shares."""
     paths = [args.input, getattr(args, "target", None), getattr(args, "flow", None)]
+    paths.append(getattr(args, "sweep", None))
     key = "\0".join(str(Path(p).resolve()) for p in paths if p is not None)
     digest = hashlib.sha256(key.encode("utf-8", "surrogateescape")).hexdigest()[:8]
     return f"{Path(args.input).stem}-mmreg-{digest}"
@@ -416,6 +486,11 @@ def run(args):
         with steps.step(f"reading {args.input}"):
             X = read_input(args)
             init = make_init(args, len(X))
+            if X.shape[1] == 3 and not hasattr(init, "fit"):
+                raise CLIError(
+                    f"{args.init}: two raw sweeps have no correspondences yet to label; "
+                    "use --init euclidean or dbscan"
+                )
         record = input_record(X, args.input, args.target, args.flow)
         estimator, summary, elapsed, _ = register(
             X, init, args, input_name=args.input, steps=steps, extra_run=record
@@ -424,7 +499,8 @@ def run(args):
         moving = summary["moving"].map({True: "yes", False: "no"})
         table = summary.assign(moving=moving.where(~summary["background"], "background"))
         print(
-            f"{len(X):,} correspondences: {plural(estimator.n_clusters_, 'cluster')}, "
+            f"{len(X):,} {'points' if args.sweep is not None else 'correspondences'}: "
+            f"{plural(estimator.n_clusters_, 'cluster')}, "
             f"{plural(int(estimator.outlier_mask_.sum()), 'outlier')}, "
             f"{plural(estimator.n_iter_, 'iteration')}, "
             f"{elapsed:.2f} s"

@@ -4,6 +4,7 @@ from mmreg.estimators._base import BaseRegistration, DegenerateInputWarning
 from mmreg.estimators._em import EMResult, multi_model_em
 from mmreg.estimators._multi_model_registration import MultiModelRegistration, ScaleWarning
 from mmreg.estimators._robust_em import RobustEMResult, robust_multi_model_em
+from mmreg.estimators._two_sweeps import SweepRegistration
 
 __all__ = [
     "BaseRegistration",
@@ -12,6 +13,7 @@ __all__ = [
     "MultiModelRegistration",
     "RobustEMResult",
     "ScaleWarning",
+    "SweepRegistration",
     "multi_model_em",
     "robust_multi_model_em",
 ]

@@ -1,0 +1,362 @@
+"""Multi-body ICP: every cluster's rigid motion refined on a second point set at once.
+
+Each cluster ``j`` carries a motion ``(R_j, t_j)``; its points ``a_i`` are moved by it,
+matched to their nearest neighbour ``q_i`` in the target (one KD-tree, built once, one
+query per iteration for the points of every cluster), and the motions are updated by one
+Gauss-Newton step of the robust point-to-plane cost
+
+    sum_i rho( n_i . (R_j a_i + t_j - q_i) / s_j ),
+
+``n_i`` the unit normal of the target at ``q_i`` (PCA of its ``k`` nearest neighbours),
+``rho`` Tukey's biweight and ``s_j`` the cluster's robust residual scale (1.4826 times
+the median absolute residual, re-estimated every iteration). The 6x6 normal equations of
+all clusters are summed with one sparse product and solved as one ``(K, 6, 6)`` stack.
+
+Directions the surface does not constrain (a flat wall slides within its plane) get no
+gradient; a small damping keeps them where the start put them, so a cluster's motion
+from its correspondences survives there.
+
+Everything is vectorised over points and clusters; the only loop is over iterations.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.spatial import cKDTree
+from sklearn.utils import check_random_state
+
+__all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
+
+_MAD_TO_SIGMA = 1.4826
+# Damping of the normal equations, relative to their mean diagonal: small enough to leave
+# a well-constrained step unchanged, large enough to keep unconstrained directions still.
+_DAMPING = 1e-8
+# A cluster needs this many matched points to move (6 unknowns, and a margin).
+_MIN_MATCHES = 12
+# The kernel's scale shrinks by this factor per iteration until it reaches the robust one.
+_ANNEAL = 0.7
+
+
+def rotation_vectors_to_matrices(omega):
+    """Rotation matrices ``exp([w]_x)`` of rotation vectors (Rodrigues), batched.
+
+    Parameters
+    ----------
+    omega : ndarray of shape (K, 3)
+
+    Returns
+    -------
+    rotations : ndarray of shape (K, 3, 3)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._icp import rotation_vectors_to_matrices
+    >>> R = rotation_vectors_to_matrices(np.array([[0.0, 0.0, np.pi / 2]]))
+    >>> np.round(R[0] @ [1.0, 0.0, 0.0], 12) + 0.0
+    array([0., 1., 0.])
+    """
+    omega = np.asarray(omega, dtype=float)
+    angle = np.linalg.norm(omega, axis=1)
+    small = angle < 1e-12
+    axis = omega / np.where(small, 1.0, angle)[:, None]
+    x, y, z = axis.T
+    zero = np.zeros_like(x)
+    cross = np.stack(
+        [np.stack([zero, -z, y], -1), np.stack([z, zero, -x], -1), np.stack([-y, x, zero], -1)],
+        axis=1,
+    )
+    sin = np.sin(angle)[:, None, None]
+    cos = np.cos(angle)[:, None, None]
+    rotations = np.eye(3) + sin * cross + (1 - cos) * (cross @ cross)
+    rotations[small] = np.eye(3)
+    return rotations
+
+
+class SurfaceNormals:
+    """Unit normals of a point set from PCA of ``k`` nearest neighbours, computed on demand.
+
+    ICP asks for the normals of the target points that are some point's nearest neighbour,
+    a small share of a large sweep; each is computed once, when first asked for.
+
+    Parameters
+    ----------
+    points : ndarray of shape (m, 3)
+    tree : cKDTree of ``points``
+    k : int
+        Neighbourhood size (the point itself included).
+    workers : int
+        Threads of the KD-tree queries.
+    """
+
+    def __init__(self, points, tree, k, workers=1):
+        self.points = points
+        self.tree = tree
+        self.k = min(int(k), len(points))
+        self.workers = workers
+        self._normals = np.full((len(points), 3), np.nan)
+        self._variation = np.full(len(points), np.nan)
+        self._flatness = np.full(len(points), np.nan)
+
+    def __call__(self, index):
+        """Normals ``(len(index), 3)``, surface variations and flatness of ``points[index]``.
+
+        The surface variation is ``l_0 / (l_0 + l_1 + l_2)`` of the neighbourhood's
+        covariance eigenvalues ``l_0 <= l_1 <= l_2``: 0 on a plane, 1/3 at most; the
+        flatness is ``l_1 / l_2``: 0 on a line.
+        """
+        index = np.asarray(index, dtype=np.intp)
+        missing = np.unique(index[np.isnan(self._variation[index])])
+        if len(missing):
+            _, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
+            near = near.reshape(len(missing), self.k)
+            hood = self.points[near]
+            hood = hood - hood.mean(axis=1, keepdims=True)
+            covariance = np.einsum("nki,nkj->nij", hood, hood)
+            values, vectors = np.linalg.eigh(covariance)
+            self._normals[missing] = vectors[:, :, 0]
+            total = values.sum(axis=1)
+            self._variation[missing] = np.where(
+                total > 0, values[:, 0] / np.where(total > 0, total, 1.0), 0.0
+            )
+            self._flatness[missing] = np.where(
+                values[:, 2] > 0, values[:, 1] / np.where(values[:, 2] > 0, values[:, 2], 1.0), 0.0
+            )
+        return self._normals[index], self._variation[index], self._flatness[index]
+
+
+def _group_sums(values, groups, n_groups):
+    """Column sums of ``values`` (n, m) within each group: one sparse product."""
+    n = len(groups)
+    indicator = sparse.csr_matrix((np.ones(n), (groups, np.arange(n))), shape=(n_groups, n))
+    return np.asarray(indicator @ values)
+
+
+def group_median(values, groups, n_groups):
+    """Median of ``values`` within each group ``0..n_groups-1`` (NaN for an empty group)."""
+    order = np.lexsort((values, groups))
+    counts = np.bincount(groups, minlength=n_groups)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    ordered = values[order]
+    median = np.full(n_groups, np.nan)
+    has = counts > 0
+    low = starts[has] + (counts[has] - 1) // 2
+    high = starts[has] + counts[has] // 2
+    median[has] = 0.5 * (ordered[low] + ordered[high])
+    return median
+
+
+def subsample_groups(labels, max_per_group, random_state=None):
+    """Indices of at most ``max_per_group`` points of every group (>= 0), chosen at random.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._icp import subsample_groups
+    >>> labels = np.array([0, 0, 0, 0, 1, 1, -1])
+    >>> np.bincount(labels[subsample_groups(labels, 2, random_state=0)]).tolist()
+    [2, 2]
+    """
+    labels = np.asarray(labels)
+    members = np.flatnonzero(labels >= 0)
+    if max_per_group is None:
+        return members
+    rng = check_random_state(random_state)
+    shuffled = members[rng.permutation(len(members))]
+    order = shuffled[np.argsort(labels[shuffled], kind="stable")]
+    group = labels[order]
+    starts = np.searchsorted(group, group, side="left")
+    rank = np.arange(len(order)) - starts
+    return np.sort(order[rank < max_per_group])
+
+
+@dataclass
+class ICPResult:
+    """What :func:`multi_body_icp` returns."""
+
+    rotations: np.ndarray
+    """Refined rotation of every cluster, ``(K, 3, 3)``."""
+    translations: np.ndarray
+    """Refined translation of every cluster, ``(K, 3)``."""
+    scales: np.ndarray
+    """Robust point-to-plane residual scale of every cluster, ``(K,)`` (NaN: unmatched)."""
+    n_matched: np.ndarray
+    """Points of every cluster that found a neighbour within ``max_distance``, ``(K,)``."""
+    inlier_share: np.ndarray
+    """Share of every cluster's points within the kernel's support, ``(K,)``."""
+    n_iter: int
+    converged: bool
+
+
+def multi_body_icp(
+    a,
+    labels,
+    rotations,
+    translations,
+    target,
+    *,
+    tree=None,
+    normals=None,
+    max_distance=1.0,
+    max_iter=30,
+    tol=1e-6,
+    min_scale=1e-9,
+    kernel_width=2.0,
+    min_flatness=0.2,
+    normal_neighbors=10,
+    workers=1,
+):
+    """Refine every cluster's motion on a target point set by robust point-to-plane ICP.
+
+    Parameters
+    ----------
+    a : ndarray of shape (n, 3)
+        Points; only those with ``labels >= 0`` take part.
+    labels : ndarray of shape (n,)
+        Cluster of every point in ``0..K-1``, negative for none.
+    rotations : ndarray of shape (K, 3, 3)
+    translations : ndarray of shape (K, 3)
+        The start: ``R_j a + t_j`` should lie near the target for the points of ``j``.
+    target : ndarray of shape (m, 3)
+        The second point set, any size and order.
+    tree : cKDTree of ``target`` or None
+        Built when None.
+    normals : SurfaceNormals or None
+        The target's normals (shared between calls); built when None.
+    max_distance : float or ndarray of shape (K,)
+        A point whose nearest target point is farther than this (per cluster) is not
+        matched in that iteration.
+    max_iter : int
+        Largest number of Gauss-Newton steps.
+    tol : float
+        Converged when no step moves any cluster's points by more than this (RMS bound).
+    min_scale : float
+        Floor of the robust residual scale of every cluster.
+    kernel_width : float
+        Tukey's biweight is zero beyond this many robust scales (2, 3 and the
+        95%-efficient 4.685 gave the same errors within 3 mm, on average, on the moving
+        objects of two Argoverse 2 pairs).
+    min_flatness : float
+        Target points whose neighbourhood's two largest covariance eigenvalues have a
+        ratio below this lie on one scan line and are not used.
+    normal_neighbors : int
+        ``k`` of the normals' neighbourhoods.
+    workers : int
+        Threads of the KD-tree queries.
+
+    Returns
+    -------
+    ICPResult
+
+    Examples
+    --------
+    A plane corner moved by 5 cm and sampled again: the motion is found.
+
+    >>> import numpy as np
+    >>> from mmreg._icp import multi_body_icp
+    >>> rng = np.random.default_rng(0)
+    >>> def corner(n):
+    ...     p = rng.uniform(0, 2, (n, 3))
+    ...     p[np.arange(n), rng.integers(0, 3, n)] = 0.0  # on one of three planes
+    ...     return p
+    >>> a, target = corner(3000), corner(20000) + [0.05, -0.03, 0.02]
+    >>> result = multi_body_icp(a, np.zeros(3000, int), np.eye(3)[None], np.zeros((1, 3)),
+    ...                         target, max_distance=0.5)
+    >>> np.round(result.translations[0], 2) + 0.0
+    array([ 0.05, -0.03,  0.02])
+    """
+    a = np.asarray(a, dtype=float)
+    labels = np.asarray(labels, dtype=np.intp)
+    target = np.asarray(target, dtype=float)
+    rotations = np.array(rotations, dtype=float)
+    translations = np.array(translations, dtype=float)
+    n_clusters = len(rotations)
+    if tree is None:
+        tree = cKDTree(target)
+    if normals is None:
+        normals = SurfaceNormals(target, tree, normal_neighbors, workers)
+    gate = np.broadcast_to(np.asarray(max_distance, dtype=float), (n_clusters,))
+    members = np.flatnonzero(labels >= 0)
+    points, group = a[members], labels[members]
+    scales = np.full(n_clusters, np.nan)
+    n_matched = np.zeros(n_clusters, dtype=np.intp)
+    inlier_share = np.zeros(n_clusters)
+    converged = False
+    n_iter = 0
+    if not n_clusters or not len(members):
+        return ICPResult(rotations, translations, scales, n_matched, inlier_share, 0, True)
+    sizes = np.bincount(group, minlength=n_clusters)
+    every_point, every_group = points, group
+    # A cluster whose step fell below ``tol`` is done: later iterations leave its points
+    # out (hypothesis tests run hundreds of clusters, most of which settle early).
+    alive = np.ones(n_clusters, dtype=bool)
+    for iteration in range(max_iter + 1):
+        final = converged or iteration == max_iter
+        if final or alive.all():
+            points, group = every_point, every_group
+        else:
+            keep = alive[every_group]
+            points, group = every_point[keep], every_group[keep]
+        moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
+        distance, nearest = tree.query(
+            moved, distance_upper_bound=float(gate.max()), workers=workers
+        )
+        matched = distance <= gate[group]
+        rows = np.flatnonzero(matched)
+        g = group[rows]
+        p = moved[rows]
+        normal, _, flatness = normals(nearest[rows])
+        # A neighbourhood on one scan line has no normal (any direction across the line
+        # fits): its "normal" would pull the points towards the other sweep's rings.
+        flat = flatness >= min_flatness
+        rows, g, p, normal = rows[flat], g[flat], p[flat], normal[flat]
+        residual = np.einsum("ni,ni->n", normal, p - target[nearest[rows]])
+        n_matched = np.bincount(g, minlength=n_clusters)
+        robust = _MAD_TO_SIGMA * group_median(np.abs(residual), g, n_clusters)
+        # Anneal from the gate down to the robust scale: where most points sit on
+        # surfaces that do not constrain the error (a box's other faces), the median
+        # residual is near zero and would reject the few points that carry it.
+        annealed = np.fmax(robust, _ANNEAL**iteration * gate / kernel_width)
+        scales = np.maximum(np.where(np.isnan(robust), np.nan, annealed), min_scale)
+        cut = kernel_width * scales[g]
+        u = residual / cut
+        inside = np.abs(u) < 1
+        weight = np.where(inside, (1 - u**2) ** 2, 0.0)
+        inlier_share = np.bincount(g[inside], minlength=n_clusters) / np.maximum(sizes, 1)
+        if final:  # this pass only measured the final motions
+            break
+        # Linearise about each cluster's centroid of matched points: a rotation about a
+        # far-away origin would couple with the translation and condition badly.
+        weight_sums = np.bincount(g, weights=weight, minlength=n_clusters)
+        centroid = (
+            _group_sums(weight[:, None] * p, g, n_clusters)
+            / np.maximum(weight_sums, 1e-300)[:, None]
+        )
+        lever = p - centroid[g]
+        jacobian = np.hstack([np.cross(lever, normal), normal])  # d r / d (omega, v)
+        weighted = weight[:, None] * jacobian
+        outer = (weighted[:, :, None] * jacobian[:, None, :]).reshape(len(rows), 36)
+        hessian = _group_sums(outer, g, n_clusters).reshape(n_clusters, 6, 6)
+        gradient = _group_sums(weighted * residual[:, None], g, n_clusters)
+        diagonal = np.einsum("kii->k", hessian) / 6
+        active = (n_matched >= _MIN_MATCHES) & (diagonal > 0)
+        hessian += (_DAMPING * diagonal + 1e-300)[:, None, None] * np.eye(6)
+        step = np.zeros((n_clusters, 6))
+        if active.any():
+            step[active] = -np.linalg.solve(hessian[active], gradient[active][:, :, None])[:, :, 0]
+        turn = rotation_vectors_to_matrices(step[:, :3])
+        # x -> turn (x - c) + c + v, composed with the current motion.
+        rotations = turn @ rotations
+        translations = (
+            np.einsum("kij,kj->ki", turn, translations - centroid) + centroid + step[:, 3:]
+        )
+        spread = np.sqrt(
+            _group_sums(np.sum(lever**2, axis=1)[:, None], g, n_clusters)[:, 0]
+            / np.maximum(n_matched, 1)
+        )
+        change = np.linalg.norm(step[:, 3:], axis=1) + np.linalg.norm(step[:, :3], axis=1) * spread
+        n_iter = iteration + 1
+        alive &= change > tol
+        converged = not alive.any()
+    return ICPResult(rotations, translations, scales, n_matched, inlier_share, n_iter, converged)

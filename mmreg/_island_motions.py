@@ -1,0 +1,296 @@
+"""Raw sweeps: which islands of the first sweep move, and how, before any clustering.
+
+Every island of the first sweep gets a few starting translations (relative to the ego
+motion), as ICP-Flow does: offsets between its centroid and the centroids of nearby
+islands of the second sweep, and the peaks of a histogram of offsets from its points to
+the second sweep's points within the largest displacement. After ICP from each start,
+an island keeps the ego motion unless
+
+* the best alternative explains its points better by more than the price of its six
+  parameters (BIC: ``3 log n``), under a robust point-to-plane likelihood whose scale is
+  three times the ego motion's robust residual scale on the whole sweep,
+* it explains (residual under three scales) a tenth more of the island's points than
+  the ego motion, and a quarter of those the ego motion leaves unexplained, and
+* the alternative moves the island relative to the ego motion by mmreg's own rule
+  (:func:`mmreg._motion.moving_clusters`: median displacement over three times the
+  residual scale), with the points' feet on the second sweep's surface as the
+  correspondences.
+
+A static island always fits a little better with its own six parameters (a different
+scan pattern, occlusions); the price and the motion rule keep it static, so the static
+world reaches the estimator as one motion.
+"""
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.utils import check_random_state
+
+from mmreg._icp import subsample_groups
+from mmreg._islands import group_centroids
+from mmreg._motion import moving_clusters
+
+__all__ = ["choose_island_motions", "point_costs", "translation_starts"]
+
+# Robust cost: squared residual in units of the scale, capped here (an unmatched point
+# costs the cap).
+_CAP = 3.0
+# The likelihood's scale in units of the ego ICP's robust scale.
+_SCALE_FACTOR = 3.0
+# An alternative must explain (cost under the cap) this much larger a share of the
+# island's points than the ego motion does, and this share of those the ego motion
+# leaves unexplained (an object that moves less than its length still overlaps its
+# old place).
+_MIN_EXPLAINED = 0.1
+_MIN_RECOVERED = 0.25
+# BIC price of an island's own motion: six parameters, (6 / 2) log n.
+_PARAMETERS = 6
+# Starts per island: centroid offsets to this many islands of the second sweep, and this
+# many histogram peaks.
+_CENTROID_STARTS = 2
+_PEAKS = 2
+# Points per island that vote in the histogram, and the sample of the second sweep they
+# vote towards (a dense patch would list millions of pairs).
+_VOTERS = 32
+_VOTE_SAMPLE = 10000
+# An alternative may land on other islands' static views with at most this share of its
+# matched points.
+_MAX_TAKEN = 0.5
+# Neighbourhoods of the second sweep flatter than this are lines: distance to the point.
+_MIN_FLATNESS = 0.2
+
+
+def translation_starts(
+    a,
+    islands,
+    n_islands,
+    sweep,
+    islands2,
+    n_islands2,
+    ego,
+    *,
+    max_displacement,
+    bin_size,
+    random_state=None,
+):
+    """Starting translations of every island, relative to the ego motion.
+
+    Parameters
+    ----------
+    a : ndarray of shape (n, 3)
+        The first sweep.
+    islands : ndarray of shape (n,)
+        Island of every point of ``a`` (``-1``: none).
+    n_islands : int
+    sweep : ndarray of shape (m, 3)
+        The second sweep.
+    islands2 : ndarray of shape (m,)
+        Island of every point of ``sweep``.
+    n_islands2 : int
+    ego : tuple of ndarray
+        ``(R, t)`` of the ego motion.
+    max_displacement : float
+        Largest motion of an object relative to the ego motion.
+    bin_size : float
+        Side of the histogram's bins.
+    random_state : int, RandomState instance or None
+
+    Returns
+    -------
+    starts : ndarray of shape (n_islands, n_starts, 3)
+        Translations added to the ego motion's; the first is zero (the ego motion
+        itself); NaN where an island has fewer starts.
+
+    Examples
+    --------
+    An island moved by 2 m along x, its twin in the second sweep.
+
+    >>> import numpy as np
+    >>> from mmreg._island_motions import translation_starts
+    >>> rng = np.random.default_rng(0)
+    >>> a = rng.uniform(0, 1, (200, 3))
+    >>> sweep = a + [2.0, 0.0, 0.0]
+    >>> ego = (np.eye(3), np.zeros(3))
+    >>> starts = translation_starts(a, np.zeros(200, int), 1, sweep, np.zeros(200, int), 1,
+    ...                             ego, max_displacement=3.0, bin_size=0.25, random_state=0)
+    >>> bool(np.any(np.linalg.norm(starts[0] - [2.0, 0.0, 0.0], axis=1) < 0.2))
+    True
+    """
+    rng = check_random_state(random_state)
+    rotation, translation = ego
+    moved = a @ rotation.T + translation
+    starts = np.full((n_islands, 1 + _CENTROID_STARTS + _PEAKS, 3), np.nan)
+    starts[:, 0] = 0.0
+    if n_islands == 0:
+        return starts
+    # Centroid offsets to the nearest islands of the second sweep.
+    centroids, _ = group_centroids(moved, islands, n_islands)
+    if n_islands2:
+        centroids2, _ = group_centroids(sweep, islands2, n_islands2)
+        k = min(_CENTROID_STARTS, n_islands2)
+        distance, nearest = cKDTree(centroids2).query(
+            centroids, k=k, distance_upper_bound=max_displacement
+        )
+        distance, nearest = distance.reshape(n_islands, k), nearest.reshape(n_islands, k)
+        near = np.isfinite(distance)
+        offsets = centroids2[np.minimum(nearest, n_islands2 - 1)] - centroids[:, None]
+        starts[:, 1 : 1 + k] = np.where(near[:, :, None], offsets, np.nan)
+    # Histogram peaks of the offsets from each island's voters to the sweep's points.
+    voters = subsample_groups(islands, _VOTERS, rng)
+    sample = sweep[rng.choice(len(sweep), min(len(sweep), _VOTE_SAMPLE), replace=False)]
+    pairs = (
+        cKDTree(moved[voters])
+        .sparse_distance_matrix(cKDTree(sample), max_displacement, output_type="ndarray")
+        .view(np.recarray)
+    )
+    if not len(pairs):
+        return starts
+    source, target = pairs.i.astype(np.intp), pairs.j.astype(np.intp)
+    offsets = sample[target] - moved[voters][source]
+    bins = np.floor(offsets / bin_size).astype(np.int64)
+    # Every voter votes once per bin: a dense patch of the sweep must not outvote.
+    key = np.unique(np.column_stack([islands[voters][source], bins, source]), axis=0)
+    votes, count = np.unique(key[:, :4], axis=0, return_counts=True)
+    order = np.lexsort((-count, votes[:, 0]))
+    votes = votes[order]
+    first = np.searchsorted(votes[:, 0], votes[:, 0], side="left")
+    rank = np.arange(len(votes)) - first
+    top = rank < _PEAKS
+    starts[votes[top, 0], 1 + _CENTROID_STARTS + rank[top]] = (votes[top, 1:4] + 0.5) * bin_size
+    return starts
+
+
+def point_costs(moved, target, *, max_distance, scale):
+    """Robust cost of every moved point against the second sweep, and its foot there.
+
+    The residual is the point-to-plane distance to the nearest point of the sweep (the
+    distance to the point itself where the neighbourhood is a line); the cost is its
+    square in units of ``scale``, capped at ``3**2``, which is also the cost of a point
+    with no neighbour within ``max_distance``.
+
+    Parameters
+    ----------
+    moved : ndarray of shape (n, 3)
+    target : tuple
+        ``(sweep, tree, normals)``: the second sweep, its cKDTree and its
+        :class:`mmreg._icp.SurfaceNormals`.
+    max_distance : float
+    scale : float
+
+    Returns
+    -------
+    cost : ndarray of shape (n,)
+    foot : ndarray of shape (n, 3)
+        Where the residual ends on the sweep's surface (NaN when unmatched).
+    """
+    sweep, tree, normals = target
+    distance, nearest = tree.query(moved, distance_upper_bound=max_distance)
+    matched = np.isfinite(distance)
+    cost = np.full(len(moved), _CAP**2)
+    foot = np.full(moved.shape, np.nan)
+    rows = np.flatnonzero(matched)
+    if len(rows):
+        q = sweep[nearest[rows]]
+        normal, _, flatness = normals(nearest[rows])
+        plane = flatness >= _MIN_FLATNESS
+        along = np.einsum("ni,ni->n", normal, moved[rows] - q)
+        residual = np.where(plane, np.abs(along), distance[rows])
+        cost[rows] = np.minimum((residual / scale) ** 2, _CAP**2)
+        foot[rows] = np.where(plane[:, None], moved[rows] - along[:, None] * normal, q)
+    return cost, foot
+
+
+def choose_island_motions(
+    points, groups, n_islands, ego, motions, valid, scale, target, claims, *, max_distance
+):
+    """Which islands move, and which of their ICP results they keep.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+        Points of the first sweep (a sample of every island).
+    groups : ndarray of shape (n,)
+        Island of every point in ``0..n_islands-1``.
+    n_islands : int
+    ego : tuple of ndarray
+        ``(R, t)`` of the ego motion.
+    motions : tuple of ndarray
+        ``(rotations, translations)`` of shape ``(n_islands * n_starts, 3, 3)`` and
+        ``(n_islands * n_starts, 3)``: the ICP result of start ``s`` of island ``i`` at
+        ``i * n_starts + s``.
+    valid : ndarray of bool, shape (n_islands, n_starts)
+        Which starts exist.
+    scale : float
+        Residual scale of the ego motion (point-to-plane), the likelihood's scale.
+    target : tuple
+        ``(sweep, tree, normals)``, as :func:`point_costs` takes it.
+    claims : tuple
+        ``(tree, islands, reach)``: a cKDTree of the first sweep's island points moved by
+        the ego motion, their islands, and the distance within which a point of the
+        second sweep is the static view of one of them.
+    max_distance : float
+
+    Returns
+    -------
+    moving : ndarray of bool, shape (n_islands,)
+    pick : ndarray of shape (n_islands,)
+        Index into ``motions`` of each island's best alternative (meaningful where
+        ``moving``).
+    """
+    rotations, translations = motions
+    n_starts = valid.shape[1]
+    # The ego ICP's scale is that of its best surfaces (the kernel's inliers); the
+    # likelihood's is that of every surface: vegetation, edges, other scan lines.
+    scale = _SCALE_FACTOR * max(float(scale), np.finfo(float).tiny)
+    static_cost, _ = point_costs(
+        points @ ego[0].T + ego[1], target, max_distance=max_distance, scale=scale
+    )
+    rows = np.repeat(np.arange(len(points)), n_starts)
+    index = groups[rows] * n_starts + np.tile(np.arange(n_starts), len(points))
+    moved = np.einsum("nij,nj->ni", rotations[index], points[rows]) + translations[index]
+    cost, foot = point_costs(moved, target, max_distance=max_distance, scale=scale)
+    n_pairs = n_islands * n_starts
+    # Log-likelihood gain of each island's own motion over the ego motion's.
+    gain = 0.5 * (
+        np.bincount(index, weights=static_cost[rows], minlength=n_pairs)
+        - np.bincount(index, weights=cost, minlength=n_pairs)
+    )
+    sizes = np.bincount(groups, minlength=n_islands)
+    price = 0.5 * _PARAMETERS * np.log(np.maximum(sizes, 2))
+    # mmreg's rule on the feet as correspondences; cluster 0 is the ego motion.
+    matched = np.isfinite(foot[:, 0])
+    labels = np.where(matched, index + 1, -1)
+    moves = moving_clusters(
+        points[rows],
+        np.where(matched[:, None], foot, moved),
+        labels,
+        np.concatenate([ego[0][None], rotations]),
+        np.concatenate([ego[1][None], translations]),
+        0,
+    )[1:]
+    # Where an alternative lands on the second sweep's view of *another* island at rest,
+    # it explains this island by taking that one's points: not a motion.
+    claim_tree, claim_islands, reach = claims
+    hit = np.flatnonzero(matched)
+    distance, owner = claim_tree.query(foot[hit], distance_upper_bound=reach)
+    taken = np.isfinite(distance)
+    taken[taken] = claim_islands[owner[taken]] != groups[rows[hit][taken]]
+    share = np.bincount(index[hit], weights=taken, minlength=n_pairs) / np.maximum(
+        np.bincount(index[hit], minlength=n_pairs), 1
+    )
+    inliers = np.bincount(index, weights=cost < _CAP**2, minlength=n_pairs)
+    static_inliers = np.bincount(groups, weights=static_cost < _CAP**2, minlength=n_islands)
+    more = inliers - np.repeat(static_inliers, n_starts)
+    explained = (more >= _MIN_EXPLAINED * np.repeat(sizes, n_starts)) & (
+        more >= _MIN_RECOVERED * np.repeat(sizes - static_inliers, n_starts)
+    )
+    eligible = (
+        valid.ravel()
+        & (gain > np.repeat(price, n_starts))
+        & moves
+        & explained
+        & (share < _MAX_TAKEN)
+    ).reshape(n_islands, n_starts)
+    score = np.where(eligible, gain.reshape(n_islands, n_starts), -np.inf)
+    best = np.argmax(score, axis=1)
+    moving = eligible.any(axis=1)
+    return moving, np.arange(n_islands) * n_starts + best

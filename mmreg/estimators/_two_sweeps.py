@@ -1,0 +1,498 @@
+"""Two sweeps in, objects and scene flow out: motions refined on the second sweep.
+
+:class:`SweepRegistration` wraps a multi-model estimator. Given correspondences and the
+second sweep as its own points, the estimator's clusters are kept and each cluster's
+motion is refined by robust point-to-plane ICP on the second sweep (:mod:`mmreg._icp`),
+so a scene-flow network's bias (a systematic error that a rigid fit keeps) is removed.
+Given the first sweep alone, putative correspondences are made first: the ego motion by
+ICP from the identity, then every spatial island of the first sweep is aligned to the
+second from the ego motion and from the peaks of a histogram of translations to nearby
+points of the second sweep (as ICP-Flow does), and the estimator groups the islands'
+motions into the static world and the moving objects.
+"""
+
+from numbers import Integral, Real
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.base import BaseEstimator, ClusterMixin, _fit_context, clone
+from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+from sklearn.utils.validation import validate_data
+
+from mmreg._flow import rigid_flow
+from mmreg._icp import SurfaceNormals, multi_body_icp, subsample_groups
+from mmreg._island_motions import choose_island_motions, translation_starts
+from mmreg._islands import voxel_islands
+from mmreg._motion import moving_clusters, static_cluster
+from mmreg._validation import check_coordinate_range
+
+__all__ = ["SweepRegistration"]
+
+# Fewest points of the second sweep: the normals need neighbourhoods.
+_MIN_SWEEP_POINTS = 10
+# Raw mode: points per island in the ICP of its hypotheses, and the translation
+# histogram's bins (in units of max_distance).
+_HYPOTHESIS_POINTS = 128
+# Raw mode: Gauss-Newton steps of the hypotheses' ICP (the chosen motions are refined
+# again after the estimator, on up to max_points points).
+_HYPOTHESIS_ITER = 15
+# ICP has converged when no step moves a cluster by more than this share of max_distance.
+_TOL = 1e-4
+_BIN = 0.25
+
+
+def _check_sweep(sweep, d):
+    """The second sweep as a finite (m, d) float array; a clear ValueError otherwise."""
+    if sweep is None:
+        raise ValueError(
+            "sweep is required with (n, 3) points: pass the second sweep's points, "
+            "fit(X, sweep=points2)."
+        )
+    sweep = np.asarray(sweep)
+    if sweep.dtype.kind not in "iuf":
+        raise TypeError(f"sweep must hold numbers; got dtype {sweep.dtype}.")
+    sweep = sweep.astype(np.float64)
+    if sweep.ndim != 2 or sweep.shape[1] != d:
+        raise ValueError(f"sweep must have shape (m, {d}); got {sweep.shape}.")
+    if len(sweep) < _MIN_SWEEP_POINTS:
+        raise ValueError(
+            f"sweep has {len(sweep)} points; at least {_MIN_SWEEP_POINTS} are needed "
+            "(the normals of its surface need neighbourhoods)."
+        )
+    if not np.all(np.isfinite(sweep)):
+        raise ValueError("sweep contains NaN or infinity.")
+    check_coordinate_range(sweep, name="sweep")
+    return sweep
+
+
+class SweepRegistration(ClusterMixin, BaseEstimator):
+    """Multi-model registration of two sweeps: motions refined on the second sweep.
+
+    Two ways in, one way out:
+
+    * **refinement** -- ``X`` of shape ``(n, 6)``: correspondences ``[a | b]`` (e.g. the
+      first sweep and a scene-flow network's ``a + flow``) and ``sweep``, the second sweep
+      as its own points (any size, any order). ``estimator`` finds the clusters; the
+      motion of each is then refined by aligning its a-points to ``sweep`` with robust
+      point-to-plane ICP (Tukey's biweight, the cluster's own residual scale), all
+      clusters at once, starting from the cluster's motion.
+    * **raw** -- ``X`` of shape ``(n, 3)``: the first sweep alone. The ego motion is found
+      by ICP from the identity. Both sweeps are cut into islands (voxels of side
+      ``island_radius`` that touch, :mod:`mmreg._islands`); every island of the first is
+      aligned to ``sweep`` from the ego motion, from the offsets of its centroid to those
+      of nearby islands of the second, and from the peaks of a histogram of translations
+      towards the second sweep's points within ``max_displacement`` (as ICP-Flow does).
+      An island keeps the ego motion unless its best alternative wins by a clear margin
+      (robust point-to-plane likelihood gain over a BIC price, a fifth more of its points
+      explained, and mmreg's moving rule; :mod:`mmreg._island_motions`). The islands'
+      motions become putative correspondences for ``estimator``; the static world keeps
+      the ego motion and the other clusters are refined as above. This repeats while the
+      labels change (at most ``max_rounds`` times): a multi-body ICP around the EM.
+
+    Parameters
+    ----------
+    estimator : estimator or None, default=None
+        The multi-model estimator (fitted on clones). None:
+        ``MultiModelRegistration(variant="sweep", tau=5.0)``, the variant for real LiDAR.
+    refine : {"moving", "all"}, default="moving"
+        Which clusters' motions are refined in refinement mode. ``"moving"`` keeps the
+        static world's motion from the correspondences: a network's flow on the static
+        world is as good as the ego pose it was computed with, and on real sweeps ICP
+        moves it by 1-2 cm (different scan lines, occlusions). Raw mode refines all.
+    max_icp_iter : int, default=30
+        Gauss-Newton steps of every ICP.
+    max_distance : float, default=1.0
+        A point is matched to the second sweep only within this distance (units of the
+        points; 1 m suits LiDAR).
+    max_points : int or None, default=5000
+        Points per cluster used by the ICP (chosen at random); None: all.
+    island_radius : float, default=0.5
+        Raw mode: side of the voxels whose touching sets are the sweeps' islands (points
+        within this distance always share an island).
+    min_island_size : int, default=30
+        Raw mode: smaller islands take the ego motion.
+    max_displacement : float, default=3.0
+        Raw mode: largest motion of an object relative to the static world, between the
+        sweeps (3 m: 30 m/s at 10 Hz).
+    max_rounds : int, default=2
+        Raw mode: most rounds of estimator and ICP.
+    random_state : int, RandomState instance or None, default=None
+        Seeds the subsampling and an ``estimator`` whose ``random_state`` is None.
+
+    Attributes
+    ----------
+    labels_ : ndarray of shape (n_samples,)
+        Cluster of every point of the first sweep, ``-1`` for outliers.
+    rotations_ : ndarray of shape (n_clusters_, 3, 3)
+    translations_ : ndarray of shape (n_clusters_, 3)
+        Motion of every cluster: the first sweep's point ``a`` of cluster ``j`` lies at
+        ``rotations_[j] @ a + translations_[j]`` in the second.
+    n_clusters_ : int
+    static_cluster_ : int
+        The static world's cluster, -1 if none.
+    moving_ : ndarray of shape (n_clusters_,)
+        Whether each cluster moves relative to the static world.
+    flow_ : ndarray of shape (n_samples, 3)
+        Scene flow of every point of the first sweep; an outlier moves with the cluster
+        of its nearest clustered point.
+    sigmas_ : ndarray of shape (n_clusters_,)
+        The estimator's noise scale of each cluster's correspondences.
+    outlier_mask_ : ndarray of shape (n_samples,)
+        True where ``labels_`` is -1.
+    n_iter_ : int
+        EM iterations of the estimator (last round).
+    converged_ : bool
+        Whether the estimator settled (last round).
+    icp_scales_ : ndarray of shape (n_clusters_,)
+        Robust point-to-plane residual scale of each cluster on the second sweep (NaN for
+        clusters not refined).
+    estimator_ : estimator
+        The fitted ``estimator`` (last round).
+    ego_motion_ : tuple of ndarray
+        Raw mode: ``(R, t)`` of the ego-motion ICP.
+    n_rounds_ : int
+        Rounds of estimator and ICP run (1 in refinement mode).
+    n_features_in_ : int
+        6 (refinement) or 3 (raw).
+
+    See Also
+    --------
+    mmreg.MultiModelRegistration : The estimator used by default.
+
+    Notes
+    -----
+    The refined motion of a cluster minimises ``sum_i rho(n_i . (R a_i + t - q_i) / s)``
+    over its points ``a_i``, ``q_i`` the nearest point of the second sweep and ``n_i`` its
+    normal (PCA of its 10 nearest neighbours; points whose neighbourhood is one scan
+    line are left out). One KD-tree over the second sweep serves every cluster and
+    iteration, and the 6x6 normal equations of all clusters are solved as one stack.
+    Clusters keep their labels: the refinement changes motions, not membership.
+
+    Examples
+    --------
+    A box moved by (0.3, 0.1, 0) and sampled again; the correspondences carry a 10% bias.
+
+    >>> import numpy as np
+    >>> from mmreg import SweepRegistration
+    >>> rng = np.random.default_rng(0)
+    >>> def box(n):
+    ...     p = rng.uniform(-1, 1, (n, 3))
+    ...     p[np.arange(n), rng.integers(0, 3, n)] = rng.choice([-1.0, 1.0], n)
+    ...     return p
+    >>> a, sweep = box(2000), box(8000) + [0.3, 0.1, 0.0]
+    >>> X = np.hstack([a, a + [0.27, 0.09, 0.0]])
+    >>> est = SweepRegistration(refine="all", max_distance=0.5, random_state=0)
+    >>> est = est.fit(X, sweep=sweep)
+    >>> est.n_clusters_, np.round(est.translations_[0], 3) + 0.0
+    (1, array([0.3, 0.1, 0. ]))
+    """
+
+    _parameter_constraints: dict = {
+        "estimator": [HasMethods(["fit"]), None],
+        "refine": [StrOptions({"moving", "all"})],
+        "max_icp_iter": [Interval(Integral, 0, None, closed="left")],
+        "max_distance": [Interval(Real, 0, None, closed="neither")],
+        "max_points": [Interval(Integral, 6, None, closed="left"), None],
+        "island_radius": [Interval(Real, 0, None, closed="neither")],
+        "min_island_size": [Interval(Integral, 1, None, closed="left")],
+        "max_displacement": [Interval(Real, 0, None, closed="neither")],
+        "max_rounds": [Interval(Integral, 1, None, closed="left")],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(
+        self,
+        estimator=None,
+        *,
+        refine="moving",
+        max_icp_iter=30,
+        max_distance=1.0,
+        max_points=5000,
+        island_radius=0.5,
+        min_island_size=30,
+        max_displacement=3.0,
+        max_rounds=2,
+        random_state=None,
+    ):
+        self.estimator = estimator
+        self.refine = refine
+        self.max_icp_iter = max_icp_iter
+        self.max_distance = max_distance
+        self.max_points = max_points
+        self.island_radius = island_radius
+        self.min_island_size = min_island_size
+        self.max_displacement = max_displacement
+        self.max_rounds = max_rounds
+        self.random_state = random_state
+
+    def _make_estimator(self, random_state):
+        if self.estimator is None:
+            from mmreg.estimators._multi_model_registration import MultiModelRegistration
+
+            estimator = MultiModelRegistration(variant="sweep", tau=5.0)
+        else:
+            estimator = clone(self.estimator)
+        params = estimator.get_params(deep=False)
+        if "random_state" in params and params["random_state"] is None:
+            estimator.set_params(random_state=random_state.randint(2**31 - 1))
+        return estimator
+
+    @_fit_context(prefer_skip_nested_validation=False)
+    def fit(self, X, y=None, *, sweep=None):
+        """Find the objects and their motions, refined on the second sweep.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, 6) or (n_samples, 3)
+            Correspondences ``[a | b]`` (refinement), or the first sweep alone (raw).
+            Without ``sweep``, correspondences of any even number of columns ``2 d``
+            give the estimator's result, unrefined.
+        y : Ignored
+            Not used, present for API consistency.
+        sweep : array-like of shape (m, 3) or None
+            The second sweep, any size and order; required with ``(n, 3)`` points.
+
+        Returns
+        -------
+        self : SweepRegistration
+        """
+        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3)
+        check_coordinate_range(X)
+        rng = check_random_state(self.random_state)
+        if sweep is None and X.shape[1] % 2 == 0:
+            # Without a second sweep there is nothing to refine on: the estimator's result.
+            estimator = self._make_estimator(rng).fit(X)
+            d = X.shape[1] // 2
+            labels, rotations, translations, static, moving = self._clusters(estimator, X)
+            self.estimator_, self.n_rounds_ = estimator, 1
+            self._store(X[:, :d], labels, rotations, translations, static)
+            self.icp_scales_ = np.full(len(rotations), np.nan)
+            self._copy_estimator_state(estimator)
+            self.moving_ = moving
+            return self
+        if X.shape[1] not in (3, 6):
+            raise ValueError(
+                "X must be (n, 6) correspondences [a | b] or (n, 3) points of the first "
+                f"sweep; got X with n_features = {X.shape[1]}."
+            )
+        sweep = _check_sweep(sweep, 3)
+        a = X[:, :3]
+        tree = cKDTree(sweep)
+        normals = SurfaceNormals(sweep, tree, 10)
+        context = (sweep, tree, normals, rng)
+        if X.shape[1] == 6:
+            estimator = self._make_estimator(rng).fit(X)
+            labels, rotations, translations, static, moving = self._clusters(estimator, X)
+            refine = moving.copy() if self.refine == "moving" else np.ones(len(moving), bool)
+            rotations, translations, scales = self._refine(
+                a, labels, rotations, translations, refine, context
+            )
+            self.n_rounds_ = 1
+        else:
+            labels, estimator, rotations, translations, scales, static = self._raw(a, context)
+        self.estimator_ = estimator
+        self.icp_scales_ = scales
+        self._copy_estimator_state(estimator)
+        self._store(a, labels, rotations, translations, static)
+        self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
+        return self
+
+    def _copy_estimator_state(self, estimator):
+        n_clusters = len(estimator.rotations_)
+        self.sigmas_ = np.asarray(getattr(estimator, "sigmas_", np.full(n_clusters, np.nan)))
+        self.outlier_mask_ = np.asarray(estimator.labels_) < 0
+        self.n_iter_ = getattr(estimator, "n_iter_", 0)
+        self.converged_ = getattr(estimator, "converged_", True)
+
+    def _store(self, a, labels, rotations, translations, static):
+        self.labels_ = labels
+        self.rotations_ = rotations
+        self.translations_ = translations
+        self.n_clusters_ = len(rotations)
+        self.static_cluster_ = static
+        self.flow_ = rigid_flow(a, labels, rotations, translations)
+
+    @staticmethod
+    def _clusters(estimator, X):
+        """Labels, motions, static world and moving flags of a fitted estimator."""
+        labels = np.asarray(estimator.labels_)
+        rotations = np.asarray(estimator.rotations_, dtype=float)
+        translations = np.asarray(estimator.translations_, dtype=float)
+        static = getattr(estimator, "static_cluster_", None)
+        if static is None:
+            static = static_cluster(labels)
+        moving = getattr(estimator, "moving_", None)
+        if moving is None:
+            a, b = X[:, :3], X[:, 3:]
+            moving = moving_clusters(a, b, labels, rotations, translations, static)
+        return labels, rotations, translations, int(static), np.asarray(moving, dtype=bool)
+
+    @staticmethod
+    def _moving(a, b, labels, rotations, translations, static):
+        if static < 0:
+            return np.ones(len(rotations), dtype=bool)
+        return moving_clusters(a, b, labels, rotations, translations, static)
+
+    def _refine(self, a, labels, rotations, translations, refine, context):
+        """ICP of the clusters flagged ``refine`` on the sweep; the others keep their motion."""
+        sweep, tree, normals, rng = context
+        rotations, translations = rotations.copy(), translations.copy()
+        scales = np.full(len(rotations), np.nan)
+        chosen = np.flatnonzero(refine)
+        if not len(chosen) or self.max_icp_iter == 0:
+            return rotations, translations, scales
+        index = -np.ones(len(rotations) + 1, dtype=np.intp)
+        index[chosen] = np.arange(len(chosen))
+        sub = np.where(labels >= 0, index[labels], -1)
+        keep = subsample_groups(sub, self.max_points, rng)
+        mask = np.full(len(a), -1, dtype=np.intp)
+        mask[keep] = sub[keep]
+        result = multi_body_icp(
+            a,
+            mask,
+            rotations[chosen],
+            translations[chosen],
+            sweep,
+            tree=tree,
+            normals=normals,
+            max_distance=self.max_distance,
+            max_iter=self.max_icp_iter,
+            tol=_TOL * self.max_distance,
+        )
+        rotations[chosen] = result.rotations
+        translations[chosen] = result.translations
+        scales[chosen] = result.scales
+        return rotations, translations, scales
+
+    def _ego_motion(self, a, context):
+        """The dominant motion: ICP of the whole first sweep from the identity, coarse to fine.
+
+        Returns the motion and its robust point-to-plane residual scale.
+        """
+        sweep, tree, normals, rng = context
+        labels = np.zeros(len(a), dtype=np.intp)
+        keep = subsample_groups(labels, self.max_points, rng)
+        mask = np.full(len(a), -1, dtype=np.intp)
+        mask[keep] = 0
+        rotation, translation = np.eye(3)[None], np.zeros((1, 3))
+        for reach in (2.0, 1.0):
+            result = multi_body_icp(
+                a,
+                mask,
+                rotation,
+                translation,
+                sweep,
+                tree=tree,
+                normals=normals,
+                max_distance=reach * self.max_distance,
+                max_iter=self.max_icp_iter,
+                tol=_TOL * self.max_distance,
+            )
+            rotation, translation = result.rotations, result.translations
+        return (rotation[0], translation[0]), float(result.scales[0])
+
+    def _island_motions(self, a, context):
+        """Every island's motion: the ego motion unless another one clearly explains it.
+
+        Returns the islands of the first sweep, their rotations and translations, and
+        whether each moves relative to the ego motion.
+        """
+        sweep, tree, normals, rng = context
+        ego, sigma = self._ego_motion(a, context)
+        self.ego_motion_ = ego
+        islands, n_islands = voxel_islands(a, self.island_radius, self.min_island_size)
+        islands2, n_islands2 = voxel_islands(sweep, self.island_radius, self.min_island_size)
+        starts = translation_starts(
+            a,
+            islands,
+            n_islands,
+            sweep,
+            islands2,
+            n_islands2,
+            ego,
+            max_displacement=self.max_displacement,
+            bin_size=_BIN * self.max_distance,
+            random_state=rng,
+        )
+        n_starts = starts.shape[1]
+        # Every (island, start) pair is one cluster of one multi-body ICP.
+        chosen = subsample_groups(islands, _HYPOTHESIS_POINTS, rng)
+        rows = np.repeat(chosen, n_starts)
+        pair = islands[rows] * n_starts + np.tile(np.arange(n_starts), len(chosen))
+        valid = np.isfinite(starts).all(axis=2).ravel()
+        pair = np.where(valid[pair], pair, -1)
+        n_pairs = n_islands * n_starts
+        rotations = np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy()
+        translations = ego[1] + np.nan_to_num(starts).reshape(n_pairs, 3)
+        result = multi_body_icp(
+            a[rows],
+            pair,
+            rotations,
+            translations,
+            sweep,
+            tree=tree,
+            normals=normals,
+            max_distance=self.max_distance,
+            max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
+            tol=_TOL * self.max_distance,
+        )
+        motions = (result.rotations, result.translations)
+        inside = np.flatnonzero(islands >= 0)
+        resting = a[inside] @ ego[0].T + ego[1]
+        moving, pick = choose_island_motions(
+            a[chosen],
+            islands[chosen],
+            n_islands,
+            ego,
+            motions,
+            valid.reshape(n_islands, n_starts),
+            sigma,
+            (sweep, tree, normals),
+            (cKDTree(resting), islands[inside], 0.5 * self.island_radius),
+            max_distance=self.max_distance,
+        )
+        rotations = np.broadcast_to(ego[0], (n_islands, 3, 3)).copy()
+        translations = np.broadcast_to(ego[1], (n_islands, 3)).copy()
+        rotations[moving] = result.rotations[pick[moving]]
+        translations[moving] = result.translations[pick[moving]]
+        return islands, rotations, translations, moving
+
+    def _raw(self, a, context):
+        sweep, tree, normals, rng = context
+        islands, rotations, translations, _ = self._island_motions(a, context)
+        ego = self.ego_motion_
+        # Label 0: the ego motion, for the small islands and every static one.
+        motions = (
+            np.concatenate([ego[0][None], rotations]),
+            np.concatenate([ego[1][None], translations]),
+        )
+        labels = islands + 1
+        previous = None
+        for round_ in range(1, self.max_rounds + 1):
+            b = rigid_flow(a, labels, *motions) + a
+            estimator = self._make_estimator(rng).fit(np.hstack([a, b]))
+            labels, rotations, translations, static, _ = self._clusters(
+                estimator, np.hstack([a, b])
+            )
+            # The static world keeps the ego motion: its ICP used the whole sweep, and
+            # on real sweeps one fitted to the static cluster alone was worse (static EPE
+            # 0.031 m against 0.020 m on icpflow_av2_demo).
+            refine = np.ones(len(rotations), dtype=bool)
+            if static >= 0:
+                refine[static] = False
+                rotations[static], translations[static] = ego
+            rotations, translations, scales = self._refine(
+                a, labels, rotations, translations, refine, context
+            )
+            motions = (rotations, translations)
+            self.n_rounds_ = round_
+            if previous is not None and np.array_equal(previous, labels):
+                break
+            previous = labels
+        return labels, estimator, rotations, translations, scales, static
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.allow_nan = False
+        return tags
