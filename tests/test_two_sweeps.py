@@ -176,6 +176,15 @@ def test_cli_registers_two_raw_sweeps_and_refines_a_flow(tmp_path):
         found = np.load(tmp_path / out / "labels.npy")
         assert len(found) == len(a)
         assert len(np.unique(found[found >= 0])) == 3
+        # What was written is the first sweep and where its points move, not the input:
+        # view and evaluate read it from the result.
+        written = np.load(tmp_path / out / "X.npy")
+        np.testing.assert_array_equal(written[:, :3], a)
+        picture = tmp_path / f"{out}.png"
+        assert main(["view", str(tmp_path / out), "--out", str(picture)]) == 0
+        assert picture.stat().st_size > 0
+        np.save(tmp_path / "truth.npy", labels)
+        assert main(["evaluate", str(tmp_path / out), str(tmp_path / "truth.npy")]) == 0
 
 
 def test_cli_target_of_another_size_points_to_sweep(tmp_path, capsys):

@@ -452,7 +452,9 @@ def register(
                 run,
                 extra_files,
                 overwrite=getattr(args, "overwrite", False),
-                save_input=getattr(args, "save_input", True),  # no input file: keep X
+                # No input file, or (with --sweep) what is written is not the input but
+                # the first sweep and where its points move: keep X for view/evaluate.
+                save_input=getattr(args, "save_input", True) or sweep is not None,
             )
     return estimator, summary, elapsed, n_initial
 
