@@ -1,4 +1,4 @@
-"""The ``mmreg`` command: ``mmreg demo``, ``register``, ``evaluate`` and ``view``.
+"""The ``mmreg`` command: ``mmreg demo``, ``register``, ``evaluate``, ``view`` and ``run``.
 
 ``mmreg --help`` lists the subcommands, ``mmreg COMMAND --help`` their options; this
 module is also runnable as ``python -m mmreg.cli``. The subcommands live in
