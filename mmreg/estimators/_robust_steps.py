@@ -174,10 +174,10 @@ def estimate_range_growth(
     residuals ``squared`` (``r_i^2``, of the clustered correspondences) is maximised
     over 0 and a logarithmic grid of ``n_grid`` values around ``1 / median(||a||^2)``,
     ``sigma_j`` profiled out in closed form; a growth above 0 must raise it by more than
-    the BIC price of one parameter. ``robust``: over the residuals within the
-    ``confidence`` quantile of the median scale (at growth 0, then at the growth found),
-    so that the wrong correspondences a cluster still holds do not decide how the noise
-    grows.
+    the BIC price of one parameter. ``robust``: each ``sigma_j`` from the median of its
+    normalised residuals and each residual's cost truncated at the ``confidence``
+    quantile, so that the wrong correspondences a cluster still holds do not decide how
+    the noise grows.
     """
     rows = np.flatnonzero((labels >= 0) & np.isfinite(squared))
     if len(rows) < 2 or n_clusters == 0:
@@ -196,42 +196,31 @@ def estimate_range_growth(
     else:  # one noise scale for all clusters (see pool_sigmas)
         j = np.zeros(len(rows), dtype=np.intp)
         n_clusters = 1
-    floor2 = sigma_floor**2
-    squared = squared[rows]
-    if not robust:
-        return _growth_by_likelihood(range2, squared, j, n_clusters, grid, floor2, d)
-    # Robust: the likelihood over the inliers of the current growth (residual within
-    # the confidence quantile of the median scale), twice. (A truncated likelihood over
-    # all rows would pay for a growth that spreads the residuals past the cut-off.)
-    growth, limit = 0.0, chi2.ppf(confidence, d)
-    for _ in range(2):
-        normalised = squared / (1.0 + growth * range2) ** 2
-        if n_clusters == 1:  # a selection, not a sort
-            scale2 = np.array([np.median(normalised)]) / chi2.ppf(0.5, d)
-        else:
-            scale2 = group_median(normalised, j, n_clusters) / chi2.ppf(0.5, d)
-        scale2 = np.maximum(np.nan_to_num(scale2), floor2)
-        keep = normalised <= limit * scale2[j]
-        growth = _growth_by_likelihood(
-            range2[keep], squared[keep], j[keep], n_clusters, grid, floor2, d
-        )
-    return growth
-
-
-def _growth_by_likelihood(range2, squared, j, n_clusters, grid, floor2, d):
-    """The growth of ``grid`` of highest profile likelihood, 0 unless it pays its BIC."""
-    if len(squared) < 2:
-        return 0.0
     sizes = np.bincount(j, minlength=n_clusters)
+    floor2 = sigma_floor**2
     log_like = np.empty(len(grid))
+    limit = chi2.ppf(confidence, d) if robust else np.inf
     for k, growth in enumerate(grid):
         g2 = (1.0 + growth * range2) ** 2
-        sigma2 = np.bincount(j, weights=squared / g2, minlength=n_clusters)
+        normalised = squared[rows] / g2
+        if robust:
+            if n_clusters == 1:  # a selection, not a sort
+                sigma2 = np.array([np.median(normalised)]) / chi2.ppf(0.5, d)
+            else:
+                sigma2 = group_median(normalised, j, n_clusters) / chi2.ppf(0.5, d)
+            sigma2 = np.maximum(np.nan_to_num(sigma2), floor2)
+            # Truncated at the inlier quantile: a wrong correspondence costs a constant.
+            fit = np.minimum(normalised / sigma2[j], limit)
+            log_like[k] = -0.5 * (
+                d * np.sum(sizes * np.log(sigma2)) + d * np.sum(np.log(g2)) + np.sum(fit)
+            )
+            continue
+        sigma2 = np.bincount(j, weights=normalised, minlength=n_clusters)
         sigma2 = np.maximum(sigma2 / np.maximum(d * sizes, 1), floor2)
         log_like[k] = -0.5 * d * np.sum(sizes * np.log(sigma2)) - 0.5 * d * np.sum(np.log(g2))
     best = int(np.argmax(log_like))
     # BIC: the growth is one more parameter, worth log(n) / 2 of likelihood.
-    if log_like[best] - log_like[0] <= 0.5 * np.log(len(squared)):
+    if log_like[best] - log_like[0] <= 0.5 * np.log(len(rows)):
         return 0.0
     return float(grid[best])
 
