@@ -26,6 +26,9 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
 
+# The same median as the command line's motion statistics (the mean of the two middle values).
+from mmreg._motion import _group_median
+
 __all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
 
 _MAD_TO_SIGMA = 1.4826
@@ -131,20 +134,6 @@ def _group_sums(values, groups, n_groups):
     n = len(groups)
     indicator = sparse.csr_matrix((np.ones(n), (groups, np.arange(n))), shape=(n_groups, n))
     return np.asarray(indicator @ values)
-
-
-def group_median(values, groups, n_groups):
-    """Median of ``values`` within each group ``0..n_groups-1`` (NaN for an empty group)."""
-    order = np.lexsort((values, groups))
-    counts = np.bincount(groups, minlength=n_groups)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    ordered = values[order]
-    median = np.full(n_groups, np.nan)
-    has = counts > 0
-    low = starts[has] + (counts[has] - 1) // 2
-    high = starts[has] + counts[has] // 2
-    median[has] = 0.5 * (ordered[low] + ordered[high])
-    return median
 
 
 def subsample_groups(labels, max_per_group, random_state=None):
@@ -313,7 +302,7 @@ def multi_body_icp(
         rows, g, p, normal = rows[flat], g[flat], p[flat], normal[flat]
         residual = np.einsum("ni,ni->n", normal, p - target[nearest[rows]])
         n_matched = np.bincount(g, minlength=n_clusters)
-        robust = _MAD_TO_SIGMA * group_median(np.abs(residual), g, n_clusters)
+        robust = _MAD_TO_SIGMA * _group_median(np.abs(residual), g, n_clusters)
         # Anneal from the gate down to the robust scale: where most points sit on
         # surfaces that do not constrain the error (a box's other faces), the median
         # residual is near zero and would reject the few points that carry it.
