@@ -169,8 +169,23 @@ def _argoverse2_jobs(log_dir, drop_ground, pairs, prefix=""):
 
     log = Argoverse2Log(log_dir)
     stamps = log.timestamps
-    kind = Argoverse2SweepPairJob if pairs == "sweeps" else Argoverse2PairJob
-    return [kind(f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground) for i in range(len(log))]
+    if pairs == "sweeps":
+        # Only pairs of sweeps: the last sweep of a truncated log may be paired with an
+        # annotated time that has no sweep (its flow is known, its points are not).
+        return [
+            Argoverse2SweepPairJob(f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground)
+            for i in range(len(stamps) - 1)
+        ]
+    return [
+        Argoverse2PairJob(f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground)
+        for i in range(len(log))
+    ]
+
+
+def _check_some(jobs, folder):
+    if not jobs:
+        raise ValueError(f"{folder}: no pair of consecutive LiDAR sweeps in its log(s).")
+    return jobs
 
 
 def _npy_columns(path):
@@ -238,14 +253,15 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned"):
         raise ValueError(f"{folder}: not a folder; a dataset is a folder of files or logs.")
     if layout in ("auto", "argoverse2"):
         if _is_argoverse2_log(folder):
-            return _argoverse2_jobs(folder, drop_ground, pairs)
+            return _check_some(_argoverse2_jobs(folder, drop_ground, pairs), folder)
         logs = sorted(p for p in folder.iterdir() if p.is_dir() and _is_argoverse2_log(p))
         if logs:
-            return [
+            jobs = [
                 job
                 for log in logs
                 for job in _argoverse2_jobs(log, drop_ground, pairs, f"{log.name}_")
             ]
+            return _check_some(jobs, folder)
         if layout == "argoverse2":
             raise ValueError(
                 f"{folder}: not an Argoverse 2 log (no sensors/lidar) nor a folder of logs."

@@ -323,6 +323,10 @@ def _write_sweep_log(folder):
                 pose=_pose(8.0 + 0.5 * k, 3, 1.0),
             )
         )
+    # Annotated one step past the last sweep, as the AV2 API's truncated logs: a third
+    # pair of flow, but not of sweeps.
+    stamps.append(stamps[-1] + 100_000_000)
+    cuboids.append(cuboids[-1] | dict(timestamp_ns=stamps[-1], pose=_pose(9.5, 3, 1.0)))
     ego = {t: _pose(1.0 * k) for k, t in enumerate(stamps)}
     return write_argoverse2_log(folder, sweeps, ego, cuboids)
 
@@ -334,6 +338,7 @@ def test_argoverse2_log_from_the_two_sweeps(tmp_path, scheduler, capsys):
     assert main([*command, "-q"]) == 0
     summary = pd.read_csv(out / "summary.csv")
     jobs = dataset_jobs(log, pairs="sweeps")
+    assert len(dataset_jobs(log)) == 3 and len(jobs) == 2
     assert summary["job"].astype(str).tolist() == [job.name for job in jobs]
     assert summary["n"].tolist() == [400, 410] and summary["n_sweep"].tolist() == [410, 390]
     for job, (_, row) in zip(jobs, summary.iterrows(), strict=True):
