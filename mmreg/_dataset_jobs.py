@@ -3,7 +3,9 @@
 A job is a small frozen dataclass (picklable: it holds paths, not data) with a unique
 ``name`` and a ``load()`` that reads its input where it runs (a Dask worker), returning
 a dict with ``X`` (n, 6) and, when the data have them, ``labels_true`` (n,) (negative:
-unknown or outlier, not scored) and ``flow_true`` (n, 3).
+unknown or outlier, not scored) and ``flow_true`` (n, 3). A job of two raw sweeps
+(``pairs="sweeps"``) gives ``X`` (n, 3), the first sweep, and ``sweep`` (m, 3), the second
+(any size, any order), for :class:`mmreg.SweepRegistration`.
 
 :func:`dataset_jobs` lists the jobs of a folder:
 
@@ -13,6 +15,10 @@ unknown or outlier, not scored) and ``flow_true`` (n, 3).
 * a folder of frames (``*.ply``, ``*.pcd``, ``*.xyz``, or ``*.npy`` of shape (n, 3)), in
   name order: one job per consecutive pair, frame ``k + 1`` giving the b-points of frame
   ``k`` row by row (the clouds must be index-aligned);
+* with ``pairs="sweeps"``, the frames or an Argoverse 2 log's sweeps are raw sweeps: one
+  job per consecutive pair, sweep ``k`` registered to sweep ``k + 1`` from the points
+  alone (any sizes and orders); an Argoverse 2 job is still scored against the true flow
+  of sweep ``k``;
 * a folder of correspondence files (``*.npy`` (n, 6), ``*.npz``, ``*.csv``, ``*.txt``):
   one job per file. An ``.npz`` may also hold the truth: ``labels`` (n,) and ``flow``
   (n, 3).
@@ -27,13 +33,16 @@ import numpy as np
 
 __all__ = [
     "Argoverse2PairJob",
+    "Argoverse2SweepPairJob",
     "CorrespondenceFileJob",
     "FramePairJob",
+    "SweepPairJob",
     "dataset_jobs",
 ]
 
 FRAME_EXTENSIONS = (".ply", ".pcd", ".xyz")
 CORRESPONDENCE_EXTENSIONS = (".npy", ".npz", ".csv", ".txt")
+PAIRS = ("aligned", "sweeps")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,9 +61,27 @@ class FramePairJob:
         if len(a) != len(b):
             raise ValueError(
                 f"{self.target}: holds {len(b)} points but {self.source} holds {len(a)}; "
-                "consecutive frames must be index-aligned (row i of one is row i of the other)."
+                "consecutive frames must be index-aligned (row i of one is row i of the other); "
+                "for raw sweeps of any sizes and orders use pairs='sweeps' "
+                "('mmreg run --pairs sweeps')."
             )
         return {"X": np.hstack([a, b])}
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepPairJob:
+    """Frame ``source`` and the next frame ``target`` as two raw sweeps (any sizes, orders)."""
+
+    name: str
+    source: str
+    target: str
+
+    def load(self):
+        from mmreg import io as mmio
+
+        a = mmio._read_points(self.source, "the first sweep's points")
+        sweep = mmio._read_points(self.target, "the second sweep's points")
+        return {"X": a, "sweep": sweep}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,19 +130,62 @@ class Argoverse2PairJob:
         return {"X": scene.X, "labels_true": scene.labels, "flow_true": scene.flow}
 
 
+@dataclasses.dataclass(frozen=True)
+class Argoverse2SweepPairJob:
+    """Sweep pair ``index`` of an Argoverse 2 log as two raw sweeps, scored by the true flow.
+
+    ``X`` is sweep t's points and ``sweep`` sweep t+1's (both without the ground when
+    ``drop_ground``); the true flow and labels are those of sweep t.
+    """
+
+    name: str
+    log_dir: str
+    index: int
+    drop_ground: bool = True
+
+    def load(self):
+        from mmreg.datasets import load_argoverse2
+
+        scene = load_argoverse2(self.log_dir, self.index, drop_ground=self.drop_ground)
+        if scene.sweep2 is None:
+            raise ValueError(
+                f"{self.log_dir}: no lidar sweep at {scene.timestamps[1]}, the next pose's "
+                "time; pairs='sweeps' needs both sweeps."
+            )
+        return {
+            "X": scene.a,
+            "sweep": scene.sweep2,
+            "labels_true": scene.labels,
+            "flow_true": scene.flow,
+        }
+
+
 def _is_argoverse2_log(folder):
     return (Path(folder) / "sensors" / "lidar").is_dir()
 
 
-def _argoverse2_jobs(log_dir, drop_ground, prefix=""):
+def _argoverse2_jobs(log_dir, drop_ground, pairs, prefix=""):
     from mmreg.datasets import Argoverse2Log
 
     log = Argoverse2Log(log_dir)
     stamps = log.timestamps
+    if pairs == "sweeps":
+        # Only pairs of sweeps: the last sweep of a truncated log may be paired with an
+        # annotated time that has no sweep (its flow is known, its points are not).
+        return [
+            Argoverse2SweepPairJob(f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground)
+            for i in range(len(stamps) - 1)
+        ]
     return [
         Argoverse2PairJob(f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground)
         for i in range(len(log))
     ]
+
+
+def _check_some(jobs, folder):
+    if not jobs:
+        raise ValueError(f"{folder}: no pair of consecutive LiDAR sweeps in its log(s).")
+    return jobs
 
 
 def _npy_columns(path):
@@ -125,7 +195,7 @@ def _npy_columns(path):
     return shape[1] if len(shape) == 2 else None
 
 
-def dataset_jobs(path, *, layout="auto", drop_ground=True):
+def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned"):
     """The jobs of the dataset at ``path`` (a folder), in a stable order.
 
     Parameters
@@ -138,10 +208,19 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True):
         arrays, else correspondence files.
     drop_ground : bool, default=True
         Argoverse 2: remove the ground points (by the log's ground height map).
+    pairs : {"aligned", "sweeps"}, default="aligned"
+        What a pair of consecutive frames or sweeps is. ``"aligned"``: correspondences,
+        row ``i`` of frame ``k + 1`` matching row ``i`` of frame ``k`` (Argoverse 2: the
+        true flow gives every point's match). ``"sweeps"``: two raw sweeps of any sizes
+        and orders, to register from the points alone with
+        :class:`mmreg.SweepRegistration` (Argoverse 2: still scored against the true
+        flow). Not for a folder of correspondence files.
 
     Returns
     -------
-    jobs : list of FramePairJob, CorrespondenceFileJob or Argoverse2PairJob
+    jobs : list
+        Of FramePairJob, SweepPairJob, CorrespondenceFileJob, Argoverse2PairJob or
+        Argoverse2SweepPairJob.
 
     Raises
     ------
@@ -165,6 +244,8 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True):
     allowed = ("auto", "argoverse2", "frames", "correspondences")
     if layout not in allowed:
         raise ValueError(f"layout must be one of {allowed}; got {layout!r}.")
+    if pairs not in PAIRS:
+        raise ValueError(f"pairs must be one of {PAIRS}; got {pairs!r}.")
     folder = Path(path)
     if not folder.exists():
         raise FileNotFoundError(f"{folder}: no such folder (the dataset).")
@@ -172,12 +253,15 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True):
         raise ValueError(f"{folder}: not a folder; a dataset is a folder of files or logs.")
     if layout in ("auto", "argoverse2"):
         if _is_argoverse2_log(folder):
-            return _argoverse2_jobs(folder, drop_ground)
+            return _check_some(_argoverse2_jobs(folder, drop_ground, pairs), folder)
         logs = sorted(p for p in folder.iterdir() if p.is_dir() and _is_argoverse2_log(p))
         if logs:
-            return [
-                job for log in logs for job in _argoverse2_jobs(log, drop_ground, f"{log.name}_")
+            jobs = [
+                job
+                for log in logs
+                for job in _argoverse2_jobs(log, drop_ground, pairs, f"{log.name}_")
             ]
+            return _check_some(jobs, folder)
         if layout == "argoverse2":
             raise ValueError(
                 f"{folder}: not an Argoverse 2 log (no sensors/lidar) nor a folder of logs."
@@ -219,10 +303,16 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True):
     if layout == "frames":
         if len(files) < 2:
             raise ValueError(f"{folder}: one frame only; a job is a pair of consecutive frames.")
+        kind = SweepPairJob if pairs == "sweeps" else FramePairJob
         return [
-            FramePairJob(f"{first.stem}__{second.stem}", str(first), str(second))
+            kind(f"{first.stem}__{second.stem}", str(first), str(second))
             for first, second in zip(files[:-1], files[1:], strict=True)
         ]
+    if pairs == "sweeps":
+        raise ValueError(
+            f"{folder}: holds correspondence files; pairs='sweeps' needs frames (point "
+            "clouds or (n, 3) .npy files) or Argoverse 2 logs."
+        )
     names = [p.stem for p in files]
     if len(set(names)) != len(names):
         raise ValueError(f"{folder}: two files share a name but for the extension.")

@@ -10,10 +10,15 @@ Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas
 ``flow`` (the rigid flow, :attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when
 the estimator reports it) and ``meta``: a JSON string with the job's summary row and the
 fingerprint of (job, estimator) the result belongs to.
+
+A job of two raw sweeps (``dataset_jobs(..., pairs="sweeps")``) loads the first sweep
+``X`` (n, 3) and the second ``sweep`` (m, 3); it is fitted as ``fit(X, sweep=sweep)``,
+by :func:`default_sweep_estimator` unless another estimator taking ``sweep`` is given.
 """
 
 import contextlib
 import hashlib
+import inspect
 import json
 import logging
 import math
@@ -26,18 +31,23 @@ import numpy as np
 
 from mmreg._dataset_jobs import (
     Argoverse2PairJob,
+    Argoverse2SweepPairJob,
     CorrespondenceFileJob,
     FramePairJob,
+    SweepPairJob,
     check_jobs,
     dataset_jobs,
 )
 
 __all__ = [
     "Argoverse2PairJob",
+    "Argoverse2SweepPairJob",
     "CorrespondenceFileJob",
     "FramePairJob",
+    "SweepPairJob",
     "dataset_jobs",
     "default_estimator",
+    "default_sweep_estimator",
     "read_job_result",
     "run_dataset",
 ]
@@ -66,6 +76,24 @@ def default_estimator():
     from mmreg import MultiModelRegistration
 
     return MultiModelRegistration(variant="sweep", tau=5.0, random_state=0)
+
+
+def default_sweep_estimator():
+    """The estimator for pairs of raw sweeps: ``SweepRegistration(default_estimator())``."""
+    from mmreg import SweepRegistration
+
+    return SweepRegistration(default_estimator(), random_state=0)
+
+
+# Jobs whose load() gives a second sweep to fit on (fit(X, sweep=...)).
+_SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob)
+
+
+def _takes_sweep(estimator):
+    try:
+        return "sweep" in inspect.signature(estimator.fit).parameters
+    except (TypeError, ValueError):  # no signature to read: let fit decide
+        return True
 
 
 def _describe(value):
@@ -133,12 +161,15 @@ def _process(job, estimator):
         data = job.load()
         X = np.asarray(data["X"], dtype=float)
         row["n"] = len(X)
+        sweep = data.get("sweep")
+        if sweep is not None:
+            row["n_sweep"] = len(sweep)
         row["load_s"] = time.perf_counter() - start
         model = clone(estimator)
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            model.fit(X)
+            model.fit(X, **({} if sweep is None else {"sweep": sweep}))
         row["fit_s"] = time.perf_counter() - start
         moving = getattr(model, "moving_", None)
         row.update(
@@ -279,11 +310,16 @@ def run_dataset(
     jobs : str, path-like or list of jobs
         A dataset folder (its jobs: :func:`dataset_jobs`), or jobs: objects with a
         unique ``name`` (a file name) and a ``load()`` returning ``{"X": (n, 6)}``, plus
-        ``"labels_true"`` (n,) and ``"flow_true"`` (n, 3) when the truth is known. They
-        are pickled to the workers, which must be able to read the files they name.
+        ``"labels_true"`` (n,) and ``"flow_true"`` (n, 3) when the truth is known, and
+        ``"sweep"`` (m, 3) for a job of two raw sweeps (then ``X`` may be (n, 3): the
+        first sweep; see ``pairs`` of :func:`dataset_jobs`). They are pickled to the
+        workers, which must be able to read the files they name.
     estimator : estimator, default=None
         A scikit-learn style estimator (``fit(X)``, ``labels_``, ``rotations_``,
-        ``translations_``, ``sigmas_``, ``flow_``); None: :func:`default_estimator`.
+        ``translations_``, ``sigmas_``, ``flow_``); None: :func:`default_estimator`, or
+        :func:`default_sweep_estimator` when the jobs are pairs of raw sweeps. Jobs with
+        a second sweep need an estimator whose ``fit`` takes ``sweep``
+        (:class:`~mmreg.SweepRegistration`).
     out : str or path-like, default="mmreg-run"
         Folder of the results (created): ``jobs/<name>.npz``, ``summary.parquet``,
         ``summary.csv``.
@@ -302,7 +338,8 @@ def run_dataset(
     -------
     summary : pandas.DataFrame
         One row per job, in the jobs' order: ``job``, ``status`` (``"done"`` or
-        ``"error"``), ``n`` (correspondences), ``n_clusters``, ``n_moving``,
+        ``"error"``), ``n`` (correspondences, or points of the first sweep; ``n_sweep``:
+        of the second), ``n_clusters``, ``n_moving``,
         ``n_outliers``, ``n_iter``, ``converged``, ``load_s``, ``fit_s`` (seconds, on the
         worker), ``resumed`` (read from an earlier run), ``error``, ``warnings``, and with
         the truth ``iou``, ``objects_found``, ``moving_objects``, ``moving_found``
@@ -337,10 +374,17 @@ def run_dataset(
     if isinstance(jobs, (str, Path)):
         jobs = dataset_jobs(jobs)
     jobs = check_jobs(jobs)
+    sweeps = any(isinstance(job, _SWEEP_JOBS) for job in jobs)
     if estimator is None:
-        estimator = default_estimator()
+        estimator = default_sweep_estimator() if sweeps else default_estimator()
     if not hasattr(estimator, "fit"):
         raise TypeError(f"estimator must have a fit method; got {type(estimator).__name__}.")
+    if sweeps and not _takes_sweep(estimator):
+        raise TypeError(
+            f"the jobs are pairs of raw sweeps, fitted as fit(X, sweep=...), but "
+            f"{type(estimator).__name__}.fit takes no sweep; wrap it: "
+            "SweepRegistration(estimator)."
+        )
     if n_workers is not None and (not isinstance(n_workers, int) or n_workers < 1):
         raise ValueError(f"n_workers must be a positive integer or None; got {n_workers!r}.")
     out = Path(out)

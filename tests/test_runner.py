@@ -1,16 +1,24 @@
 """The dataset runner (mmreg.runner, ``mmreg run``) on a LocalCluster started here."""
 
+import json
 import os
+import pickle
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from mmreg import MultiModelRegistration
+from mmreg import MultiModelRegistration, SweepRegistration
 from mmreg.cli import main
 from mmreg.datasets import load_argoverse2, write_argoverse2_log
-from mmreg.runner import dataset_jobs, default_estimator, read_job_result, run_dataset
+from mmreg.runner import (
+    dataset_jobs,
+    default_estimator,
+    default_sweep_estimator,
+    read_job_result,
+    run_dataset,
+)
 
 distributed = pytest.importorskip("distributed")
 
@@ -207,3 +215,140 @@ def test_command_line_resumes_and_guards_out(tmp_path, scheduler, capsys):
     assert os.listdir(mine) == ["notes.txt"]
     assert main([*command[:-1], "--tau", "2", "--quiet", "--overwrite"]) == 0
     assert Path(out / "run.json").read_text().count('"tau": 2.0') == 1
+
+
+def _box_surface(rng, n, low, high):
+    """``n`` points on the faces of the box [low, high]: a surface ICP can lock onto."""
+    low, high = np.asarray(low, float), np.asarray(high, float)
+    points = rng.uniform(low, high, (n, 3))
+    face = rng.integers(0, 3, n)
+    points[np.arange(n), face] = np.where(rng.integers(0, 2, n), high[face], low[face])
+    return points
+
+
+def _write_sweeps(folder):
+    """Three raw sweeps of a still box and a box moving 0.5 m along x per sweep: every
+    sweep samples the surfaces anew, so the frames differ in size and order.
+
+    Returns the folder and, per frame, how many of its first rows are the still box.
+    """
+    rng = np.random.default_rng(0)
+    folder.mkdir(parents=True, exist_ok=True)
+    still = []
+    for k, (n_still, n_moving) in enumerate([(250, 150), (220, 170), (270, 130)]):
+        moving = _box_surface(rng, n_moving, [6, 0, 0], [8, 2, 1.5]) + [0.5 * k, 0, 0]
+        frame = np.vstack([_box_surface(rng, n_still, [0, 0, 0], [3, 3, 2]), moving])
+        np.save(folder / f"frame{k}.npy", frame)
+        still.append(n_still)
+    return folder, still
+
+
+def _fit_job(job, estimator):
+    from sklearn.base import clone
+
+    data = job.load()
+    return clone(estimator).fit(data["X"], sweep=data["sweep"])
+
+
+def test_raw_sweeps_of_different_sizes_one_job_per_pair(tmp_path, scheduler):
+    data, still = _write_sweeps(tmp_path / "frames")
+    jobs = dataset_jobs(data, pairs="sweeps")
+    assert [job.name for job in jobs] == ["frame0__frame1", "frame1__frame2"]
+    assert all(pickle.loads(pickle.dumps(job)) == job for job in jobs)  # sent to workers
+    out = tmp_path / "out"
+    summary = run_dataset(jobs, None, out, scheduler=scheduler, progress=False)
+    assert summary["job"].tolist() == ["frame0__frame1", "frame1__frame2"]
+    assert (summary["status"] == "done").all()
+    assert summary["n"].tolist() == [400, 390] and summary["n_sweep"].tolist() == [390, 400]
+    for k, job in enumerate(jobs):
+        arrays, row = read_job_result(out / "jobs" / f"{job.name}.npz")
+        expected = _fit_job(job, default_sweep_estimator())
+        np.testing.assert_array_equal(arrays["labels"], expected.labels_)
+        np.testing.assert_array_equal(arrays["flow"], expected.flow_)
+        n = len(np.load(data / f"frame{k}.npy"))
+        assert arrays["labels"].shape == (n,) and arrays["flow"].shape == (n, 3)
+        # Each box is one cluster of the first sweep, the second box the moving one.
+        labels = arrays["labels"]
+        box1, box2 = np.unique(labels[: still[k]]), np.unique(labels[still[k] :])
+        assert len(box1) == len(box2) == 1 and box1[0] != box2[0]
+        assert arrays["moving"].tolist() == [j == box2[0] for j in range(row["n_clusters"])]
+        truth = np.zeros((n, 3))
+        truth[still[k] :, 0] = 0.5
+        assert np.abs(arrays["flow"] - truth).max() < 0.1  # sampling spacing: about 0.2
+    # Resumable: a second run reads every result back.
+    again = run_dataset(jobs, None, out, scheduler=scheduler, progress=False)
+    assert again["resumed"].all()
+
+
+def test_frames_of_different_sizes_point_to_the_sweeps_option(tmp_path, scheduler, capsys):
+    data, _ = _write_sweeps(tmp_path / "frames")
+    summary = run_dataset(data, _estimator(), tmp_path / "out", scheduler=scheduler, progress=False)
+    assert (summary["status"] == "error").all()
+    assert all("pairs='sweeps'" in error for error in summary["error"])
+    command = ["run", str(data), "--out", str(tmp_path / "cli"), "--scheduler", scheduler, "-q"]
+    assert main(command) == 1
+    assert "--pairs sweeps" in capsys.readouterr().err
+    # A plain estimator cannot take the second sweep: said before any job runs.
+    with pytest.raises(TypeError, match="SweepRegistration"):
+        run_dataset(dataset_jobs(data, pairs="sweeps"), _estimator(), tmp_path / "other")
+    with pytest.raises(ValueError, match="pairs='sweeps' needs frames"):
+        dataset_jobs(_write_correspondences(tmp_path / "pairs"), pairs="sweeps")
+
+
+def _write_correspondences(folder):
+    folder.mkdir()
+    np.save(folder / "pair0.npy", np.zeros((5, 6)))
+    return folder
+
+
+def _write_sweep_log(folder):
+    """Three sweeps seen from a car driving 1 m per sweep: a road (ground), a building
+    and a car driving 1.5 m per sweep, each sweep sampled anew (sizes differ)."""
+    rng = np.random.default_rng(2)
+    stamps = [315966265259836000 + k * 100_000_000 for k in range(3)]
+    sweeps, cuboids = {}, []
+    for k, (n_road, n_building, n_car) in enumerate(
+        [(200, 250, 150), (180, 280, 130), (220, 230, 160)]
+    ):
+        road = np.c_[rng.uniform(-20, 20, (n_road, 2)), np.zeros(n_road)]
+        building = _box_surface(rng, n_building, [-6, -8, 0.5], [-2, -4, 4]) - [k, 0, 0]
+        car = _box_surface(rng, n_car, [-2, -0.8, -0.5], [2, 0.8, 0.5]) + [8 + 0.5 * k, 3, 1]
+        sweeps[stamps[k]] = np.vstack([road, building, car])
+        cuboids.append(
+            dict(
+                timestamp_ns=stamps[k],
+                track_uuid="car-1",
+                category="REGULAR_VEHICLE",
+                size=(4.4, 1.8, 1.5),
+                pose=_pose(8.0 + 0.5 * k, 3, 1.0),
+            )
+        )
+    # Annotated one step past the last sweep, as the AV2 API's truncated logs: a third
+    # pair of flow, but not of sweeps.
+    stamps.append(stamps[-1] + 100_000_000)
+    cuboids.append(cuboids[-1] | dict(timestamp_ns=stamps[-1], pose=_pose(9.5, 3, 1.0)))
+    ego = {t: _pose(1.0 * k) for k, t in enumerate(stamps)}
+    return write_argoverse2_log(folder, sweeps, ego, cuboids)
+
+
+def test_argoverse2_log_from_the_two_sweeps(tmp_path, scheduler, capsys):
+    log = _write_sweep_log(tmp_path / "log")
+    out = tmp_path / "out"
+    command = ["run", str(log), "--pairs", "sweeps", "--out", str(out), "--scheduler", scheduler]
+    assert main([*command, "-q"]) == 0
+    summary = pd.read_csv(out / "summary.csv")
+    jobs = dataset_jobs(log, pairs="sweeps")
+    assert len(dataset_jobs(log)) == 3 and len(jobs) == 2
+    assert summary["job"].astype(str).tolist() == [job.name for job in jobs]
+    assert summary["n"].tolist() == [400, 410] and summary["n_sweep"].tolist() == [410, 390]
+    for job, (_, row) in zip(jobs, summary.iterrows(), strict=True):
+        # What the command line fits: its defaults (--method sweep --tau 5 --max-iter 10).
+        inner = MultiModelRegistration(variant="sweep", tau=5.0, max_iter=10, random_state=0)
+        expected = _fit_job(job, SweepRegistration(inner, random_state=0))
+        arrays, _ = read_job_result(out / "jobs" / f"{job.name}.npz")
+        np.testing.assert_array_equal(arrays["labels"], expected.labels_)
+        assert arrays["flow"].shape == (row["n"], 3)
+        # Scored against the true flow of the first sweep: the building and the car found.
+        assert row["n_clusters"] == 2 and row["n_moving"] == 1
+        assert row["iou"] == 1.0 and row["moving_found"] == 1.0 and row["epe3d"] < 0.1
+    assert json.loads((out / "run.json").read_text())["configuration"]["pairs"] == "sweeps"

@@ -26,6 +26,15 @@ DATASET is one of
   - a folder of correspondence files ((n, 6) *.npy, *.npz, *.csv, *.txt): one job per
     file; an .npz may hold the truth too ('labels', 'flow'), then scored.
 
+--pairs says what a pair of consecutive frames or sweeps is:
+  - aligned (default): correspondences; frames must be index-aligned (same size, row i
+    of frame k+1 matches row i of frame k); Argoverse 2: the ground-truth flow gives
+    every point's match;
+  - sweeps: two raw sweeps of any sizes and orders (real LiDAR frames), registered from
+    the points alone: sweep k to sweep k+1 by SweepRegistration (ego motion and object
+    motions by ICP, clusters by the --method variant). Argoverse 2 jobs are still scored
+    against the ground-truth flow of sweep k. Not for correspondence files.
+
 Written into --out: jobs/<job>.npz per job (labels, rotations, translations, sigmas,
 flow, moving, meta), each whole or not at all; summary.parquet and summary.csv (one row
 per job: sizes, clusters, timings, status, and the scores when the truth is known); and
@@ -46,11 +55,14 @@ EPILOG = """\
 examples:
   mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --out val-0c6e
   mmreg run frames/ --out result --method robust --tau 1.5
+  mmreg run lidar_frames/ --pairs sweeps --out result
+  mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs sweeps
   mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val
 """
 
 METHODS = ("sweep", "robust", "paper")
 LAYOUTS = ("auto", "argoverse2", "frames", "correspondences")
+PAIRS = ("aligned", "sweeps")
 # What an 'mmreg run' folder holds at its top (jobs/ holds <job>.npz files).
 RUN_FILES = ("run.json", "summary.parquet", "summary.csv", "jobs")
 
@@ -90,6 +102,14 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=_seed, default=0, help="random seed of every job")
     parser.add_argument("--layout", choices=LAYOUTS, default="auto", help="what DATASET holds")
     parser.add_argument(
+        "--pairs",
+        choices=PAIRS,
+        default="aligned",
+        help="what consecutive frames or sweeps are: 'aligned' correspondences (default; "
+        "Argoverse 2: matched by the true flow) or raw 'sweeps' of any sizes and orders, "
+        "registered from the points alone (see above)",
+    )
+    parser.add_argument(
         "--keep-ground", action="store_true", help="Argoverse 2: keep the ground points"
     )
     parser.add_argument(
@@ -107,6 +127,7 @@ def _configuration(args):
     return {
         "dataset": str(Path(args.dataset).resolve()),
         "layout": args.layout,
+        "pairs": args.pairs,
         "drop_ground": not args.keep_ground,
         "method": args.method,
         "tau": args.tau,
@@ -162,11 +183,14 @@ def check_run_out(out, configuration, *, overwrite):
 
 
 def _estimator(args):
-    from mmreg import MultiModelRegistration
+    from mmreg import MultiModelRegistration, SweepRegistration
 
-    return MultiModelRegistration(
+    estimator = MultiModelRegistration(
         variant=args.method, tau=args.tau, max_iter=args.max_iter, random_state=args.seed
     )
+    if args.pairs == "sweeps":
+        estimator = SweepRegistration(estimator, random_state=args.seed)
+    return estimator
 
 
 def run(args):
@@ -181,7 +205,9 @@ def run(args):
     configuration = _configuration(args)
     resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
     with reading(args.dataset):
-        jobs = dataset_jobs(args.dataset, layout=args.layout, drop_ground=not args.keep_ground)
+        jobs = dataset_jobs(
+            args.dataset, layout=args.layout, drop_ground=not args.keep_ground, pairs=args.pairs
+        )
     try:
         if args.overwrite and (out / "jobs").is_dir():
             shutil.rmtree(out / "jobs")  # only result files, checked above
