@@ -91,22 +91,11 @@ class RobustEMResult(EMResult):
 
 
 def _range_noise(a, b, labels, models, sigma_floor, robust):
-    """The growth of the noise with range, and each correspondence's noise scale.
-
-    The growth is the sensor's, estimated with one noise scale for all clusters: with a
-    scale of its own, each cluster at its own range could take the growth up in its
-    scale, and a static world at one range (a backdrop) would say nothing of it.
-    """
+    """The growth of the noise with range, and each correspondence's noise scale."""
     clustered = np.where(labels < len(models.sigmas), labels, -1)
     squared = squared_residuals(a, b, clustered, models.rotations, models.translations)
     growth = estimate_range_growth(
-        a,
-        squared,
-        clustered,
-        len(models.sigmas),
-        sigma_floor,
-        per_cluster=False,
-        robust=robust,
+        a, squared, clustered, len(models.sigmas), sigma_floor, robust=robust
     )
     return growth, (range_noise_scale(a, growth) if growth > 0 else None)
 

@@ -163,21 +163,21 @@ def estimate_range_growth(
     sigma_floor,
     *,
     n_grid=25,
-    per_cluster=True,
     robust=False,
     confidence=0.999,
 ):
     """Maximum-likelihood ``growth`` of :func:`range_noise_scale` for the clusters given.
 
-    ``growth`` is the sensor's, shared by the clusters; each cluster keeps its own
-    ``sigma_j`` (``per_cluster=False``: one ``sigma`` for all). The likelihood of the
-    residuals ``squared`` (``r_i^2``, of the clustered correspondences) is maximised
-    over 0 and a logarithmic grid of ``n_grid`` values around ``1 / median(||a||^2)``,
-    ``sigma_j`` profiled out in closed form; a growth above 0 must raise it by more than
-    the BIC price of one parameter. ``robust``: each ``sigma_j`` from the median of its
-    normalised residuals and each residual's cost truncated at the ``confidence``
-    quantile, so that the wrong correspondences a cluster still holds do not decide how
-    the noise grows.
+    ``growth`` is the sensor's, estimated with one noise scale ``sigma`` for all the
+    clustered correspondences: with a scale of its own, each cluster at its own range
+    could take the growth up in its scale, and a static world at one range (a backdrop)
+    would say nothing of it. The likelihood of the residuals ``squared`` (``r_i^2``, of
+    the correspondences with ``labels >= 0``) is maximised over 0 and a logarithmic grid
+    of ``n_grid`` values around ``1 / median(||a||^2)``, ``sigma`` profiled out in
+    closed form; a growth above 0 must raise it by more than the BIC price of one
+    parameter. ``robust``: ``sigma`` from the median of the normalised residuals and
+    each residual's cost truncated at the ``confidence`` quantile, so that the wrong
+    correspondences the clusters still hold do not decide how the noise grows.
     """
     rows = np.flatnonzero((labels >= 0) & np.isfinite(squared))
     if len(rows) < 2 or n_clusters == 0:
@@ -191,36 +191,26 @@ def estimate_range_growth(
     if typical <= 0:
         return 0.0
     grid = np.concatenate([[0.0], np.logspace(-3, 3, n_grid) / typical])
-    if per_cluster:
-        j = labels[rows]
-    else:  # one noise scale for all clusters (see pool_sigmas)
-        j = np.zeros(len(rows), dtype=np.intp)
-        n_clusters = 1
-    sizes = np.bincount(j, minlength=n_clusters)
+    n = len(rows)
     floor2 = sigma_floor**2
     log_like = np.empty(len(grid))
-    limit = chi2.ppf(confidence, d) if robust else np.inf
+    limit = chi2.ppf(confidence, d)
     for k, growth in enumerate(grid):
         g2 = (1.0 + growth * range2) ** 2
         normalised = squared[rows] / g2
         if robust:
-            if n_clusters == 1:  # a selection, not a sort
-                sigma2 = np.array([np.median(normalised)]) / chi2.ppf(0.5, d)
-            else:
-                sigma2 = group_median(normalised, j, n_clusters) / chi2.ppf(0.5, d)
-            sigma2 = np.maximum(np.nan_to_num(sigma2), floor2)
+            sigma2 = max(float(np.median(normalised)) / chi2.ppf(0.5, d), floor2)
             # Truncated at the inlier quantile: a wrong correspondence costs a constant.
-            fit = np.minimum(normalised / sigma2[j], limit)
-            log_like[k] = -0.5 * (
-                d * np.sum(sizes * np.log(sigma2)) + d * np.sum(np.log(g2)) + np.sum(fit)
-            )
-            continue
-        sigma2 = np.bincount(j, weights=normalised, minlength=n_clusters)
-        sigma2 = np.maximum(sigma2 / np.maximum(d * sizes, 1), floor2)
-        log_like[k] = -0.5 * d * np.sum(sizes * np.log(sigma2)) - 0.5 * d * np.sum(np.log(g2))
+            fit = np.minimum(normalised / sigma2, limit)
+            log_like[k] = -0.5 * (d * (n * np.log(sigma2)) + d * np.sum(np.log(g2)) + np.sum(fit))
+        else:
+            # bincount's sequential sum, as the per-cluster version summed: same floats.
+            total = np.bincount(np.zeros(n, dtype=np.intp), weights=normalised)[0]
+            sigma2 = max(float(total) / (d * n), floor2)
+            log_like[k] = -0.5 * d * (n * np.log(sigma2)) - 0.5 * d * np.sum(np.log(g2))
     best = int(np.argmax(log_like))
     # BIC: the growth is one more parameter, worth log(n) / 2 of likelihood.
-    if log_like[best] - log_like[0] <= 0.5 * np.log(len(rows)):
+    if log_like[best] - log_like[0] <= 0.5 * np.log(n):
         return 0.0
     return float(grid[best])
 
