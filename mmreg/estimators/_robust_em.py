@@ -216,8 +216,9 @@ def robust_multi_model_em(
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
     neighbours = NeighbourTable(a, workers=workers) if run["boundary_layers"] else None
-    # The robust default shares the table; the paper-equivalence of the shared-scale
-    # loop keeps its own query (ties among equidistant neighbours may order apart).
+    # The sweep variant reads the spacing off the table; the robust default keeps its own
+    # k=6 query, whose ties among equidistant neighbours may order apart from the
+    # table's, so that its labels stay as they were.
     spacing = (
         _sampling_spacing(a, neighbours=neighbours if sweep else None, workers=workers)
         if run["boundary_layers"]
@@ -231,6 +232,17 @@ def robust_multi_model_em(
     growth = 0.0
     static = -1
     reference = None  # the static world's motion, once there is one
+
+    def layers_of(labels, n_clusters):
+        return boundary_layers(
+            a,
+            labels,
+            n_clusters,
+            spacing,
+            exempt=static,
+            neighbours=neighbours,
+            ignore_strays=sweep,
+        )
 
     def fit(labels, n_clusters):
         return trimmed_fit(
@@ -289,15 +301,7 @@ def robust_multi_model_em(
             # 5. Dissolve layers of flow that bled along another cluster's boundary.
             bled = []
             if run["boundary_layers"]:
-                bled = boundary_layers(
-                    a,
-                    members,
-                    n_clusters,
-                    spacing,
-                    exempt=static,
-                    neighbours=neighbours,
-                    ignore_strays=sweep,
-                )
+                bled = layers_of(members, n_clusters)
                 members[np.isin(members, bled)] = -1
             # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
             counts = np.bincount(members[members >= 0], minlength=n_clusters)
@@ -365,21 +369,12 @@ def robust_multi_model_em(
                     ),
                     per_cluster=sweep,
                 )
-
             for group in found:
                 new[group] = len(kept)
                 kept = np.append(kept, -1)
             if run["boundary_layers"] and found:
                 # A proposal along another cluster's boundary is bled flow too.
-                layers = boundary_layers(
-                    a,
-                    new,
-                    len(kept),
-                    spacing,
-                    exempt=static,
-                    neighbours=neighbours,
-                    ignore_strays=sweep,
-                )
+                layers = layers_of(new, len(kept))
                 first_new = len(models.sigmas)
                 found = [f for k, f in enumerate(found) if first_new + k not in layers]
                 new[np.isin(new, layers[layers >= first_new])] = -1
@@ -406,8 +401,9 @@ def robust_multi_model_em(
             if static_root >= 0:
                 reported[slow] = static_root
             before = reported[np.where(labels >= 0, root[np.maximum(labels, 0)], -1)]
-            after = reported[np.append(kept, -1)[new]]
-            after[(new >= 0) & (np.append(kept, -1)[new] < 0)] = -2  # a proposal's
+            origin = np.append(kept, -1)[new]  # -1 for outliers and proposals
+            after = reported[origin]
+            after[(new >= 0) & (origin < 0)] = -2  # a proposal's
             n_changed = int(np.count_nonzero(before != after))
             new, n_clusters = _compact_initial(new)
             step["changed"] = n_changed
@@ -421,7 +417,6 @@ def robust_multi_model_em(
     # Final clean-up: one more merge, the static world gathered, no boundary layer and
     # no cluster below m_min; numbered by size. With max_iter=0 the initial clusters are
     # returned as given (the paper's contract).
-
     if n_iter and n_clusters:
         inliers, models = fit(labels, n_clusters)
         root = np.arange(n_clusters)
@@ -447,15 +442,7 @@ def robust_multi_model_em(
             )
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
         if run["boundary_layers"]:
-            bled = boundary_layers(
-                a,
-                labels,
-                n_clusters,
-                spacing,
-                exempt=static,
-                neighbours=neighbours,
-                ignore_strays=sweep,
-            )
+            bled = layers_of(labels, n_clusters)
             labels = np.where(np.isin(labels, bled), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
     labels, kept = drop_small_clusters(labels, counts, min_cluster_size)
