@@ -287,7 +287,7 @@ def make_method(name, *, strict=True, **params):
             exactly (paper: ``tau`` 1.5 m, 5 m on flow scenes; ``min_cluster_size=4``,
             ``max_iter=10``).
         ``"mmreg"``
-            :class:`~mmreg.MultiModelRegistration` as it comes (``variant="robust"``).
+            :class:`~mmreg.MultiModelRegistration` as it comes (``variant="sweep"``).
     strict : bool, default=True
         If False, parameters the method does not take (:func:`method_parameters`) are
         dropped instead of raising: a script can hand every method one set of parameters

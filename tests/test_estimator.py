@@ -78,11 +78,15 @@ def test_recovery_under_bounded_noise(noisy_scene):
 def test_gate_separates_far_objects_with_same_motion():
     scene = make_scene(n_objects=3, n_points=600, noise=0.005, same_motion=1, random_state=3)
     # Object 0 starts whole, the others in pieces: object 0's cluster is the largest one
-    # with that motion, so without the gate it wins object 1's correspondences.
+    # with that motion, so without the gate it wins object 1's correspondences. The two
+    # alike hold two thirds of the scene, which the default reads as one static world
+    # (test_sweep_variant_takes_a_majority_motion_for_one_static_world); without a
+    # static world the gate keeps them apart, as in Algorithm 1.
     init = split_init(scene.labels, pieces=2)
     init[scene.labels == 0] = init.max() + 1
-    gated = MultiModelRegistration(init=init, tau=1.5, min_cluster_size=20).fit(scene.X)
-    vanilla = MultiModelRegistration(init=init, tau=None, min_cluster_size=20).fit(scene.X)
+    params = {"init": init, "min_cluster_size": 20, "static_share": None}
+    gated = MultiModelRegistration(tau=1.5, **params).fit(scene.X)
+    vanilla = MultiModelRegistration(tau=None, **params).fit(scene.X)
     assert_objects_recovered(scene, gated)
     # Without the gate, the two objects with one motion end up in one cluster.
     assert vanilla.n_clusters_ == 2
@@ -200,15 +204,20 @@ def test_pipeline_and_grid_search(noiseless_scene):
         return adjusted_rand_score(y, estimator.predict(X))
 
     everything = np.arange(len(scene.X))
+    # Each object has 200 correspondences: min_cluster_size=300 drops all of them, and
+    # without the gate two motions never separate in Algorithm 1.
     search = GridSearchCV(
         MultiModelRegistration(init=split_init(scene.labels)),
-        {"tau": [0.01, 1.5], "min_cluster_size": [4, 10]},
+        {"variant": ["paper", "sweep"], "min_cluster_size": [4, 300]},
         scoring=ari,
         cv=[(everything, everything)],
     )
     search.fit(scene.X, scene.labels)
-    assert search.best_params_["tau"] == 1.5
+    assert search.best_params_["min_cluster_size"] == 4
     assert search.best_score_ == 1.0
+    results = search.cv_results_
+    dropped = results["param_min_cluster_size"] == 300
+    assert np.all(results["mean_test_score"][dropped] < 0.5)
 
 
 # --- bad input ---------------------------------------------------------------------------

@@ -3,8 +3,9 @@
 Each scene is a small stand-in for a LiDAR sweep with a network's scene flow (ground
 removed): islands of static structure farther apart than ``tau``, all moving with the ego
 motion with millimetre flow errors, and moving cars whose flow errs by centimetres. The
-robust default fails them (one shared noise scale makes the cars' flows outliers, and the
-islands stay one cluster each), which is checked too.
+default is ``variant="sweep"``; ``variant="robust"`` fails them (one shared noise scale
+makes the cars' flows outliers, and the islands stay one cluster each), which is checked
+too.
 """
 
 import numpy as np
@@ -119,9 +120,9 @@ def test_two_far_apart_objects_with_one_motion_stay_apart_without_a_majority():
     assert est.moving_.all()
 
 
-def test_the_robust_default_fails_these_scenes():
+def test_the_shared_noise_variant_fails_these_scenes():
     X, labels, _ = sweep_like_scene()
-    est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
+    est = MultiModelRegistration(tau=5.0, variant="robust", random_state=0).fit(X)
     assert est.static_cluster_ == -1
     assert est.n_clusters_ > 3 or objects_found(labels, est.labels_, objects=[1, 2]) < 1.0
 

@@ -13,7 +13,7 @@ End-to-end demo on a generated KITTI-like street (mmreg.datasets.make_street: 7 
 them moving, 16,384 correspondences from a scene flow with realistic errors, 10 % gross
 errors, the camera driving forward). The initial clusters are the scene's SegmentAnything-
 like masks (PrecomputedMasks), which beat the default Euclidean clustering on these
-scenes; the registration is MultiModelRegistration's robust default with the paper's
+scenes; the registration is MultiModelRegistration's default with the paper's
 gate for street scenes, tau = 5 m (the paper's tau = 1.5 m is for objects a few metres
 apart: on a street it keeps every tree and pole apart from the road).
 
@@ -131,7 +131,7 @@ def run(args):
         f"{np.linalg.norm(scene.ego_motion[1]):.2f} m."
     )
     print(
-        f"MultiModelRegistration (robust, tau 5 m) from {n_masks} "
+        f"MultiModelRegistration (default, tau 5 m) from {n_masks} "
         f"SAM-like masks: {estimator.n_clusters_} clusters in {estimator.n_iter_} iterations, "
         f"{elapsed:.1f} s."
     )

@@ -39,8 +39,8 @@ INPUT is one of
     scene flow, b = a + flow).
 
 --sweep S names the second sweep as its own points (any size, any order). With
-correspondences (an array, or a cloud with --target or --flow) the robust variant for
-sweeps finds the clusters and each moving cluster's motion is refined on S by robust
+correspondences (an array, or a cloud with --target or --flow) the default variant
+finds the clusters and each moving cluster's motion is refined on S by robust
 point-to-plane ICP (SweepRegistration); with a cloud INPUT alone the two raw sweeps are
 registered (ego motion, then every island of INPUT aligned to S). --target keeps its
 meaning: one b-point per a-point, in the same order.
@@ -193,7 +193,7 @@ def add_arguments(parser):
     parser.add_argument(
         "--paper",
         action="store_true",
-        help="the paper's Algorithm 1 exactly (variant='paper') instead of the robust variant",
+        help="the paper's Algorithm 1 exactly (variant='paper') instead of the default",
     )
     parser.add_argument("--seed", type=_seed, default=0, help="random seed")
     parser.add_argument(
@@ -334,7 +334,7 @@ def read_sweep(args):
     if sweep is None:
         return None
     if args.paper:
-        raise CLIError("--sweep refines the robust variant's motions; drop --paper")
+        raise CLIError("--sweep refines the default variant's motions; drop --paper")
     with reading(sweep):
         return mmio.read_point_cloud(sweep)
 
@@ -353,7 +353,7 @@ def _fit(X, init, args, steps, sweep=None):
         min_cluster_size=args.min_cluster_size,
         max_iter=args.max_iter,
         init=labels,
-        variant="paper" if args.paper else "sweep" if sweep is not None else "robust",
+        variant="paper" if args.paper else "sweep",
         random_state=args.seed,
         n_jobs=getattr(args, "n_jobs", None),
         verbose=args.verbose,

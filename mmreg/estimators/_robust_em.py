@@ -45,7 +45,7 @@ from mmreg.estimators._robust_steps import (
     log_uniform_density,
     merge_adjacent,
     merge_static_world,
-    motion_gap,
+    motion_beyond_scatter,
     propose_clusters,
     range_noise_scale,
     reject_outliers,
@@ -73,6 +73,9 @@ _MAX_OUTLIER_WEIGHT = 0.5
 # A moving object's noise scale is at most this fraction of its motion (the proposals'
 # prior, see propose_clusters).
 _MAX_NOISE_RATIO = 0.1
+# Correspondences of a scene without outliers that the sweep variant may expect to call
+# wrong (see reject_outliers).
+_FALSE_ALARMS = 0.01
 
 
 @dataclass
@@ -232,6 +235,12 @@ def robust_multi_model_em(
     growth = 0.0
     static = -1
     reference = None  # the static world's motion, once there is one
+    # A noise scale of its own is bounded by a cluster's motion relative to the static
+    # world (a network errs in proportion to it); without a static world nothing bounds
+    # it, and a few wrong correspondences near each other pass for an object with a
+    # large noise of its own: one shared scale then. The first iteration has not looked
+    # for a static world yet.
+    own_scales = sweep
 
     def layers_of(labels, n_clusters):
         return boundary_layers(
@@ -253,7 +262,7 @@ def robust_multi_model_em(
             sigma_floor,
             noise_scale,
             confidence=confidence_trim,
-            per_cluster=sweep,
+            per_cluster=own_scales,
             max_noise_ratio=_MAX_NOISE_RATIO if sweep else None,
             reference=reference,
         )
@@ -343,6 +352,7 @@ def robust_multi_model_em(
             outlier_share = np.mean(new < 0)
             if static >= 0:
                 reference = (models.rotations[static], models.translations[static])
+            own_scales = sweep and static >= 0
             # 9. New clusters from the unexplained correspondences.
             found = []
             if run["proposals"]:
@@ -452,9 +462,22 @@ def robust_multi_model_em(
     labels = rank[labels]
     static = int(rank[static]) if static >= 0 else -1
     _, models = fit(labels, n_clusters)
+    if sweep and n_iter and n_clusters and run["outliers"]:
+        labels = _readmit_outliers(
+            a,
+            b,
+            labels,
+            models,
+            static,
+            tau,
+            noise_scale,
+            outlier_share,
+            log_volume_density,
+            workers,
+        )
     moving = np.ones(n_clusters, dtype=bool)
     if static >= 0:
-        moving = motion_gap(models, static, np.arange(n_clusters)) >= min_motion
+        moving = motion_beyond_scatter(models, static, np.arange(n_clusters)) >= min_motion
         moving[static] = False
     weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), n)
     return RobustEMResult(
@@ -471,6 +494,51 @@ def robust_multi_model_em(
         static,
         moving,
     )
+
+
+def _readmit_outliers(
+    a, b, labels, models, static, tau, noise_scale, outlier_share, log_volume_density, workers
+):
+    """The outliers that the final clusters explain, given back to them.
+
+    The loop stops when few labels change, with its outliers judged by the last
+    iteration's motions and noise; judged again by the final ones (the E-step of eq. (7)
+    and the outlier test, as :meth:`predict` judges new correspondences), the tail of a
+    cluster's noise that an early, smaller scale rejected comes back.
+    """
+    rows = np.flatnonzero(labels < 0)
+    if not len(rows):
+        return labels
+    n_clusters = len(models.sigmas)
+    weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), len(labels))
+    gate = ClusterGate(
+        a, labels, n_clusters, tau, ungated=[static] if static >= 0 else [], workers=workers
+    )
+    scale = None if noise_scale is None else noise_scale[rows]
+    parameters = (models.rotations, models.translations, models.sigmas, weights)
+    query_a, query_b = a[rows], b[rows]
+    judged = assign_correspondences(
+        query_a,
+        query_b,
+        *parameters,
+        gate,
+        np.full(len(rows), -1, dtype=np.intp),
+        morton_order(np.ascontiguousarray(query_a.T)),
+        scale,
+    )
+    outlier_weight = min(max(outlier_share, 1.0 / len(labels)), _MAX_OUTLIER_WEIGHT)
+    judged = reject_outliers(
+        query_a,
+        query_b,
+        judged,
+        *parameters,
+        np.log(outlier_weight) + log_volume_density,
+        scale,
+        false_alarms=_FALSE_ALARMS * len(rows) / len(labels),
+    )
+    labels = labels.copy()
+    labels[rows] = judged
+    return labels
 
 
 def _gather_static_world(models, root, d, sigma_floor, share, min_motion):

@@ -195,14 +195,21 @@ def estimate_range_growth(
     floor2 = sigma_floor**2
     log_like = np.empty(len(grid))
     limit = chi2.ppf(confidence, d)
+    outlier_cost = None
     for k, growth in enumerate(grid):
         g2 = (1.0 + growth * range2) ** 2
         normalised = squared[rows] / g2
         if robust:
             sigma2 = max(float(np.median(normalised)) / chi2.ppf(0.5, d), floor2)
-            # Truncated at the inlier quantile: a wrong correspondence costs a constant.
-            fit = np.minimum(normalised / sigma2, limit)
-            log_like[k] = -0.5 * (d * (n * np.log(sigma2)) + d * np.sum(np.log(g2)) + np.sum(fit))
+            cost = d * np.log(sigma2 * g2) + normalised / sigma2
+            if outlier_cost is None:
+                # Equal noise (the grid's first value) puts the inlier quantile here.
+                outlier_cost = d * np.log(sigma2) + limit
+            # A wrong correspondence costs the same under every growth: truncating its
+            # residual alone would still credit it the log-density of a small scale, and
+            # a growth that shrinks the scale of the nearest points would pay for itself
+            # by calling them all wrong.
+            log_like[k] = -0.5 * np.sum(np.minimum(cost, outlier_cost))
         else:
             # bincount's sequential sum, as the per-cluster version summed: same floats.
             total = np.bincount(np.zeros(n, dtype=np.intp), weights=normalised)[0]
@@ -375,7 +382,17 @@ def log_uniform_density(a, b):
 
 
 def reject_outliers(
-    a, b, labels, rotations, translations, sigmas, weights, log_outlier, noise_scale=None
+    a,
+    b,
+    labels,
+    rotations,
+    translations,
+    sigmas,
+    weights,
+    log_outlier,
+    noise_scale=None,
+    *,
+    false_alarms=None,
 ):
     """Label -1 the correspondences the uniform outlier component explains better.
 
@@ -383,6 +400,13 @@ def reject_outliers(
     ``pi_j N(b_i - R_j a_i - t_j; 0, (sigma_j g_i)^2 I) >= pi_0 / V`` with ``log_outlier``
     the right-hand side's logarithm: a residual test at about 5-7 ``sigma_j g_i``, farther
     the more weight the cluster has and the larger the scene.
+
+    ``false_alarms``: also keep every correspondence whose residual is no larger than
+    the cluster's noise shows with probability ``false_alarms / n`` (n correspondences
+    judged), so that at most that many correspondences of a scene without outliers are
+    expected to be called wrong. Without it, classification-EM settles where the
+    outlier weight is the share that its own test rejects: the Gaussian tail beyond
+    about 4 sigma, a few in ten thousand, stays labelled -1 for ever.
     """
     d = a.shape[1]
     sq = squared_residuals(a, b, labels, rotations, translations)
@@ -391,9 +415,13 @@ def reject_outliers(
     sigma = sigmas[j] if noise_scale is None else sigmas[j] * noise_scale[rows]
     with np.errstate(divide="ignore"):
         score = np.log(weights[j]) - d * np.log(sigma) - 0.5 * d * _LOG_2PI
-    score -= 0.5 * sq[rows] / sigma**2
+    normalised = sq[rows] / sigma**2
+    score -= 0.5 * normalised
+    wrong = score < log_outlier
+    if false_alarms is not None and len(a):
+        wrong &= normalised > chi2.isf(false_alarms / len(a), d)
     out = labels.copy()
-    out[rows[score < log_outlier]] = -1
+    out[rows[wrong]] = -1
     return out
 
 
@@ -583,6 +611,24 @@ def motion_gap(models, reference, clusters):
     return np.sqrt(np.maximum(excess, 0.0) / np.maximum(moments.count, 1e-300))
 
 
+def motion_beyond_scatter(models, reference, clusters):
+    """:func:`motion_gap` less each cluster's own scatter (the RMS of its residuals).
+
+    How far a cluster's motion carries its points from where ``reference``'s carries
+    them, beyond what the cluster's own flow errs by. A scene-flow network's error on
+    the static world is a few millimetres near the sensor and centimetres in coherent
+    patches far from it (ZeroFlow: a wall 36 m away shifted by 6 cm, scattered by 2 cm);
+    such a patch fits a motion of its own, but not one that its own scatter could not
+    reach from the static world's.
+    """
+    clusters = np.asarray(clusters, dtype=np.intp)
+    moments = models.moments.take(clusters)
+    scatter = np.sqrt(
+        np.maximum(models.squared_error[clusters], 0.0) / np.maximum(moments.count, 1e-300)
+    )
+    return motion_gap(models, reference, clusters) - scatter
+
+
 def motion_size(models, clusters, static):
     """How far each cluster's motion carries its points (RMS) relative to the static
     world's motion, or, without a static world (-1), relative to standing still."""
@@ -664,14 +710,14 @@ def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
     The static world is the dominant motion (the ego motion of the sensor, for a scene
     seen from a moving vehicle): the largest cluster, with every cluster that shares its
     motion (the likelihood-ratio test of :func:`merge_adjacent`, without the distance
-    gate) or moves less than ``min_motion`` (RMS, :func:`motion_gap`) relative to it, if
-    together they hold at least ``share`` of the clustered correspondences. Clusters
-    that share its motion merge into it. Those that only move less than ``min_motion``
-    (a parked car whose flow carries a centimetre of annotation jitter) are *slow*: they
-    keep their own motion, so that their correspondences are not outliers of the static
-    world's, and are reported as part of it. Anything that moves alike but is not the
-    majority keeps the gate of eq. (7): two far-apart objects with one motion stay two
-    objects (the paper's Exp. 3).
+    gate) or moves less than ``min_motion`` relative to it beyond its own scatter
+    (:func:`motion_beyond_scatter`), if together they hold at least ``share`` of the
+    clustered correspondences. Clusters that share its motion merge into it. Those that
+    only move less than ``min_motion`` (a parked car whose flow carries a centimetre of
+    annotation jitter) are *slow*: they keep their own motion, so that their
+    correspondences are not outliers of the static world's, and are reported as part of
+    it. Anything that moves alike but is not the majority keeps the gate of eq. (7): two
+    far-apart objects with one motion stay two objects (the paper's Exp. 3).
 
     Returns
     -------
@@ -697,7 +743,7 @@ def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
     if len(others):
         pairs = np.column_stack([np.full(len(others), static), others])
         agree = _merge_ratio(models, pairs, d) < 1.0
-        slow = ~agree & (motion_gap(models, static, others) < min_motion)
+        slow = ~agree & (motion_beyond_scatter(models, static, others) < min_motion)
     joined, slow = others[agree], others[slow]
     if sizes[static] + sizes[joined].sum() + sizes[slow].sum() < share * sizes.sum():
         return none
