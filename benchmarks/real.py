@@ -23,8 +23,9 @@ inputs ``b = a + flow_in``:
                                axis on every point (seeded by the seed).
 
 Methods, each with its defaults and tau = 5 m (the paper's street and FlyingThings3D
-setting) where it takes a tau: ``mmreg`` (``MultiModelRegistration()``), ``sweep``
-(``variant="sweep"``, for real sweeps, where the estimator has it), ``paper``
+setting) where it takes a tau: ``mmreg`` (``MultiModelRegistration()``, whose default is
+``variant="sweep"``), ``sweep`` and ``robust`` (those variants: ``robust`` is the earlier
+default, one noise scale shared by all clusters), ``paper``
 (``variant="paper"``) and the baselines of :mod:`mmreg.methods` (``naive``,
 ``sequential_ransac``, ``t_linkage``); any name of ``available_methods()`` works. The
 initialisation is each method's default (Euclidean clustering, 100 clusters). A baseline
@@ -103,7 +104,7 @@ AV2_EVAL_RANGE = 50.0  # metres: Argoverse 2 scores points with |x|, |y| <= 50
 NOISE_STD = 0.02  # metres per axis
 NOISE_SCALE = 0.9  # moving objects' flow is scaled by this in the noisy variant
 
-DEFAULT_METHODS = ("mmreg", "sweep", "paper", "naive", "sequential_ransac", "t_linkage")
+DEFAULT_METHODS = ("mmreg", "robust", "paper", "naive", "sequential_ransac", "t_linkage")
 BASELINES = ("naive", "sequential_ransac", "t_linkage")
 
 # The inputs made from each scene; scenes not listed give their ground-truth flow only.
@@ -279,8 +280,9 @@ def estimator_variants():
 
 
 def default_methods():
-    """The default methods that this version of mmreg offers (``sweep`` only if it exists)."""
-    return [m for m in DEFAULT_METHODS if m != "sweep" or "sweep" in estimator_variants()]
+    """The default methods that this version of mmreg offers (variants only if they exist)."""
+    variants = estimator_variants()
+    return [m for m in DEFAULT_METHODS if m not in ("sweep", "robust") or m in variants]
 
 
 def _base_and_step(name):
@@ -300,13 +302,13 @@ def build_method(name, seed):
     base = name if ablated is None else ablated[0]
     if base == "mmreg":
         return MultiModelRegistration(tau=TAU, random_state=seed, **skip)
-    if base in ("sweep", "paper"):
+    if base in ("sweep", "robust", "paper"):
         return MultiModelRegistration(variant=base, tau=TAU, random_state=seed, **skip)
     return make_method(name, tau=TAU, random_state=seed, strict=False)
 
 
 def check_methods(names):
-    extra = {"paper"} | ({"sweep"} & estimator_variants())
+    extra = {"paper"} | ({"sweep", "robust"} & estimator_variants())
     known = set(available_methods()) | extra
     unknown = [m for m in names if m not in known]
     if unknown:
@@ -633,8 +635,8 @@ def main(argv=None):
         "--methods",
         type=lambda s: [x for x in s.split(",") if x],
         default=None,
-        help="comma-separated: mmreg, sweep, paper, or any name of "
-        "mmreg.methods.available_methods() (default: mmreg, sweep, paper and the baselines)",
+        help="comma-separated: mmreg, sweep, robust, paper, or any name of "
+        "mmreg.methods.available_methods() (default: mmreg, robust, paper and the baselines)",
     )
     parser.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 (noise and methods)")
     parser.add_argument("--out", type=Path, default=HERE / "results", help="folder for results")
