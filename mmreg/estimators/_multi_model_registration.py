@@ -12,15 +12,10 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg._gate import ClusterGate
-from mmreg._likelihood import morton_order
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
 from mmreg.estimators._robust_em import _FALSE_ALARMS, robust_multi_model_em
-from mmreg.estimators._robust_steps import (
-    assign_correspondences,
-    range_noise_scale,
-    reject_outliers,
-)
+from mmreg.estimators._robust_steps import judge_correspondences, range_noise_scale
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["MultiModelRegistration", "ScaleWarning"]
@@ -546,25 +541,16 @@ class MultiModelRegistration(BaseRegistration):
             return super().predict(X)
         check_is_fitted(self, "labels_")
         _, a, b = self._validate_correspondences(X, reset=False)
-        scale = self._noise_scale(a)
-        gate = self._fitted_gate()
-        parameters = (self.rotations_, self.translations_, self.sigmas_, self.weights_)
-        labels = assign_correspondences(
+        return judge_correspondences(
             a,
             b,
-            *parameters,
-            gate,
-            np.full(len(a), -1, dtype=np.intp),
-            morton_order(np.ascontiguousarray(a.T)),
-            scale,
-        )
-        return reject_outliers(
-            a,
-            b,
-            labels,
-            *parameters,
+            self.rotations_,
+            self.translations_,
+            self.sigmas_,
+            self.weights_,
+            self._fitted_gate(),
             self.log_outlier_density_,
-            scale,
+            self._noise_scale(a),
             false_alarms=_FALSE_ALARMS if self.variant == "sweep" else None,
         )
 

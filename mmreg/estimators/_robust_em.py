@@ -42,6 +42,7 @@ from mmreg.estimators._robust_steps import (
     drop_small_clusters,
     estimate_range_growth,
     join_moving_pieces,
+    judge_correspondences,
     log_uniform_density,
     merge_adjacent,
     merge_static_world,
@@ -514,26 +515,17 @@ def _readmit_outliers(
     gate = ClusterGate(
         a, labels, n_clusters, tau, ungated=[static] if static >= 0 else [], workers=workers
     )
-    scale = None if noise_scale is None else noise_scale[rows]
-    parameters = (models.rotations, models.translations, models.sigmas, weights)
-    query_a, query_b = a[rows], b[rows]
-    judged = assign_correspondences(
-        query_a,
-        query_b,
-        *parameters,
-        gate,
-        np.full(len(rows), -1, dtype=np.intp),
-        morton_order(np.ascontiguousarray(query_a.T)),
-        scale,
-    )
     outlier_weight = min(max(outlier_share, 1.0 / len(labels)), _MAX_OUTLIER_WEIGHT)
-    judged = reject_outliers(
-        query_a,
-        query_b,
-        judged,
-        *parameters,
+    judged = judge_correspondences(
+        a[rows],
+        b[rows],
+        models.rotations,
+        models.translations,
+        models.sigmas,
+        weights,
+        gate,
         np.log(outlier_weight) + log_volume_density,
-        scale,
+        None if noise_scale is None else noise_scale[rows],
         false_alarms=_FALSE_ALARMS * len(rows) / len(labels),
     )
     labels = labels.copy()

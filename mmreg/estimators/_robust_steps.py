@@ -25,6 +25,7 @@ from scipy.stats import binom, chi2
 
 from mmreg._connectivity import tau_components
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
+from mmreg._likelihood import morton_order
 from mmreg._moments import Moments, group_moments
 from mmreg._neighbors import NeighbourTable
 
@@ -36,6 +37,7 @@ __all__ = [
     "drop_small_clusters",
     "estimate_range_growth",
     "fit_clusters",
+    "judge_correspondences",
     "log_uniform_density",
     "join_moving_pieces",
     "merge_adjacent",
@@ -349,6 +351,11 @@ def trimmed_fit(
     return inliers, models
 
 
+def _rms(squared_sum, moments):
+    """Root mean of each cluster's summed squares over its (weighted) count."""
+    return np.sqrt(np.maximum(squared_sum, 0.0) / np.maximum(moments.count, 1e-300))
+
+
 def _motion_from(models, reference):
     """How far each cluster's motion carries its members (RMS) from ``reference``'s
     ``(R, t)``, or from standing still if None."""
@@ -357,8 +364,7 @@ def _motion_from(models, reference):
     away = models.moments.squared_error(
         np.broadcast_to(rotation, (k, d, d)), np.broadcast_to(translation, (k, d))
     )
-    excess = away - models.squared_error
-    return np.sqrt(np.maximum(excess, 0.0) / np.maximum(models.moments.count, 1e-300))
+    return _rms(away - models.squared_error, models.moments)
 
 
 def log_uniform_density(a, b):
@@ -473,6 +479,37 @@ def assign_correspondences(
             challenger[live[admitted]] = False
             challenger[live[~admitted], best[~admitted]] = False
     return labels
+
+
+def judge_correspondences(
+    a,
+    b,
+    rotations,
+    translations,
+    sigmas,
+    weights,
+    gate,
+    log_outlier,
+    noise_scale=None,
+    *,
+    false_alarms=None,
+):
+    """Correspondences in no cluster yet, judged by fitted clusters: each to its most
+    likely admitted cluster (:func:`assign_correspondences`), or -1 where the outlier
+    component explains it better (:func:`reject_outliers`)."""
+    parameters = (rotations, translations, sigmas, weights)
+    labels = assign_correspondences(
+        a,
+        b,
+        *parameters,
+        gate,
+        np.full(len(a), -1, dtype=np.intp),
+        morton_order(np.ascontiguousarray(a.T)),
+        noise_scale,
+    )
+    return reject_outliers(
+        a, b, labels, *parameters, log_outlier, noise_scale, false_alarms=false_alarms
+    )
 
 
 def adjacent_pairs(points, labels, n_clusters, tau):
@@ -608,7 +645,7 @@ def motion_gap(models, reference, clusters):
         moments.squared_error(models.rotations[reference], models.translations[reference])
         - models.squared_error[clusters]
     )
-    return np.sqrt(np.maximum(excess, 0.0) / np.maximum(moments.count, 1e-300))
+    return _rms(excess, moments)
 
 
 def motion_beyond_scatter(models, reference, clusters):
@@ -622,10 +659,7 @@ def motion_beyond_scatter(models, reference, clusters):
     reach from the static world's.
     """
     clusters = np.asarray(clusters, dtype=np.intp)
-    moments = models.moments.take(clusters)
-    scatter = np.sqrt(
-        np.maximum(models.squared_error[clusters], 0.0) / np.maximum(moments.count, 1e-300)
-    )
+    scatter = _rms(models.squared_error[clusters], models.moments.take(clusters))
     return motion_gap(models, reference, clusters) - scatter
 
 
