@@ -484,14 +484,14 @@ def _group_pair_minima(pyramid, radius, n_groups, sufficient_radius=None):
     )
 
 
-def _nearest_in_other_group(pyramid, radius):
-    """Each point's nearest point of another group closer than ``radius``, exactly.
+def _close_point_pairs(pyramid, radius, *, nearest_only=False):
+    """Pairs of points (pyramid indices) of different groups closer than ``radius``,
+    with their squared distances, by descending the pyramid a level at a time.
 
-    What a KD-tree query bounded by the next float above ``radius`` finds (squared
-    distance below that bound's square). Returns source and target (original indices)
-    and their distance.
+    Closer means what a KD-tree query bounded by the next float above ``radius`` finds
+    (squared distance below that bound's square). ``nearest_only``: pairs that cannot
+    be a point's nearest in another group are pruned on the way down.
     """
-    empty = np.zeros(0, dtype=np.intp)
     bound = np.nextafter(radius, np.inf)
     squared_bound = bound * bound
     top = pyramid.level_for(bound)
@@ -499,19 +499,31 @@ def _nearest_in_other_group(pyramid, radius):
     for level in range(top, 0, -1):
         _, a, b = pyramid.split(level, a, b)
         child = level - 1
-        lo, hi, rep = pyramid.lo[child], pyramid.hi[child], pyramid.rep[child]
         lower = _squared_lower_bounds(pyramid, child, a, b)
         keep = lower < squared_bound
         a, b, lower = a[keep], b[keep], lower[keep]
-        if not child:
-            break  # The points themselves: lower holds their squared distances.
+        if not (nearest_only and child):
+            continue  # child 0 is the points themselves: lower holds their distances
+        lo, hi, rep = pyramid.lo[child], pyramid.hi[child], pyramid.rep[child]
         # Every point of node a has a point of another group within reach[a] of it.
         reach = np.full(lo.shape[1], np.inf)
         np.minimum.at(reach, a, _squared_box_reaches(lo[:, a], hi[:, a], rep[:, b]))
         np.minimum.at(reach, b, _squared_box_reaches(lo[:, b], hi[:, b], rep[:, a]))
         keep = (lower <= reach[a]) | (lower <= reach[b])
         a, b, lower = a[keep], b[keep], lower[keep]
+    return a, b, lower
+
+
+def _nearest_in_other_group(pyramid, radius):
+    """Each point's nearest point of another group closer than ``radius``, exactly.
+
+    What a KD-tree query bounded by the next float above ``radius`` finds (squared
+    distance below that bound's square). Returns source and target (original indices)
+    and their distance.
+    """
+    a, b, lower = _close_point_pairs(pyramid, radius, nearest_only=True)
     if not len(a):
+        empty = np.zeros(0, dtype=np.intp)
         return empty, empty, np.zeros(0)
     # Each point's smallest squared distance, then one pair that attains it.
     nearest = np.full(len(pyramid.groups), np.inf)
@@ -532,15 +544,7 @@ def _pairs_across_groups(pyramid, radius):
     distance below that bound's square). Returns the two points (original indices) and
     their distance.
     """
-    bound = np.nextafter(radius, np.inf)
-    squared_bound = bound * bound
-    top = pyramid.level_for(bound)
-    a, b = pyramid.close_pairs(top, bound)
-    for level in range(top, 0, -1):
-        _, a, b = pyramid.split(level, a, b)
-        lower = _squared_lower_bounds(pyramid, level - 1, a, b)
-        keep = lower < squared_bound
-        a, b, lower = a[keep], b[keep], lower[keep]
+    a, b, lower = _close_point_pairs(pyramid, radius)
     return pyramid.order[a], pyramid.order[b], np.sqrt(lower)
 
 
