@@ -211,6 +211,8 @@ def test_bad_input():
         EuclideanClustering(n_clusters=0).fit(X)
     with pytest.raises(ValueError, match="radius"):
         EuclideanClustering(radius=-1.0).fit(X)
+    with pytest.raises(ValueError, match="max_radius"):
+        EuclideanClustering(max_radius=0.0).fit(X)
     init = EuclideanClustering(n_clusters=2).fit(X)
     with pytest.raises(ValueError, match="features"):
         init.transform(X[:, :4])
@@ -409,6 +411,26 @@ def test_many_far_apart_objects():
         assert same_partition(labels, reference_labels(points, radius, min_cluster_size))
         assert labels.max() + 1 == n_clusters
 
+
+
+def test_max_radius_keeps_far_apart_objects_apart():
+    # 60 objects 6 m apart (gaps between them of at least 3 m): 10 clusters need gaps of
+    # 6 m; capped at 2 m, every object is a cluster of its own, exactly the components
+    # of the radius graph at the cap. A cap above the chosen radius changes nothing.
+    rng = np.random.default_rng(0)
+    centres = np.stack(np.meshgrid(*[np.arange(4) * 6.0] * 3), axis=-1).reshape(-1, 3)[:60]
+    points = (centres[:, None, :] + rng.normal(scale=0.3, size=(60, 15, 3))).reshape(-1, 3)
+    objects = np.repeat(np.arange(60), 15)
+    X = np.hstack([points, points])
+    uncapped = EuclideanClustering(10).fit(X)
+    assert uncapped.n_clusters_ == 10 and uncapped.radius_ > 5.0
+    capped = EuclideanClustering(10, max_radius=2.0).fit(X)
+    assert capped.radius_ == 2.0 and capped.n_clusters_ == 60
+    assert same_partition(capped.labels_, objects)
+    assert same_partition(capped.labels_, reference_labels(points, 2.0, 4))
+    wide = EuclideanClustering(10, max_radius=2 * uncapped.radius_).fit(X)
+    assert wide.radius_ == uncapped.radius_
+    np.testing.assert_array_equal(wide.labels_, uncapped.labels_)
 
 @pytest.mark.parametrize("n_neighbors", [1, 2, 6])
 def test_many_small_trees(n_neighbors):

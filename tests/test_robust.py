@@ -116,6 +116,21 @@ def test_no_cluster_below_min_cluster_size():
     assert robust.outlier_mask_[scene.labels < 0].mean() >= 0.99
 
 
+
+def test_a_thousand_small_far_apart_objects_are_a_thousand_clusters():
+    # 1,000 objects of 20 correspondences, 6 m apart, each with a motion of its own. The
+    # 100 initial clusters asked for would need 6 m gaps, and single linkage then joins
+    # nearly all objects into one cluster, which the default took for the static world
+    # (1 cluster, IoU 0.001). With the radius capped at tau, every object starts alone.
+    scene = make_scene(1000, 20000, separation=6.0, random_state=0)
+    est = MultiModelRegistration(random_state=0).fit(scene.X)
+    assert est.init_labels_.max() + 1 == 1000
+    assert est.n_clusters_ == 1000
+    assert est.static_cluster_ == -1
+    assert iou_score(scene.labels, est.labels_) > 0.99
+    assert est.outlier_mask_.mean() < 0.01
+
+
 def street_with_depth_noise(seed=0, n=12000):
     """Road and wall 5-50 m ahead, noise growing with the square of depth, one moving car.
 

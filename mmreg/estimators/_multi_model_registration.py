@@ -99,7 +99,10 @@ class MultiModelRegistration(BaseRegistration):
     init : {"euclidean", "dbscan"}, clusterer or array-like of shape (n,), \
             default="euclidean"
         Initial clusters. ``"euclidean"``: :class:`~mmreg.init.EuclideanClustering` with
-        100 clusters, as in the paper; ``"dbscan"``: :class:`~mmreg.init.DBSCANClustering`.
+        100 clusters, as in the paper, its radius capped at ``tau`` so that every initial
+        cluster is ``tau``-connected (Definition 2; objects farther apart than ``tau``
+        then start in clusters of their own however many there are); ``"dbscan"``:
+        :class:`~mmreg.init.DBSCANClustering`.
         An mmreg initialiser is fitted on ``X``; any other object with ``fit_predict``
         (every scikit-learn clusterer) is fitted on the a-points ``X[:, :d]``. An array
         gives precomputed labels (e.g. from SAM masks), negative for none.
@@ -428,7 +431,7 @@ class MultiModelRegistration(BaseRegistration):
         self._warn_if_tau_off_scale(a)
         workers = self._workers()
         self.init_labels_ = initial_labels(
-            self.init, X, random_state=self.random_state, n_jobs=self.n_jobs
+            self.init, X, random_state=self.random_state, n_jobs=self.n_jobs, tau=self.tau
         )
         # A refit with another variant must not keep the robust variants' attributes.
         for name in _ROBUST_ATTRIBUTES:

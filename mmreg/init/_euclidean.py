@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval
 
+from mmreg._connectivity import tau_components
 from mmreg._neighbors import (
     connected_labels,
     minimum_spanning_forest,
@@ -885,7 +886,14 @@ def _radius_for_count(
 
 
 def euclidean_clustering(
-    points, *, n_clusters=100, radius=None, min_cluster_size=4, n_neighbors=6, n_jobs=None
+    points,
+    *,
+    n_clusters=100,
+    radius=None,
+    max_radius=None,
+    min_cluster_size=4,
+    n_neighbors=6,
+    n_jobs=None,
 ):
     """Euclidean cluster extraction on points, with a given or an automatic radius.
 
@@ -899,6 +907,10 @@ def euclidean_clustering(
         when ``radius`` is None.
     radius : float or None, default=None
         Largest gap within a cluster. None chooses it from ``n_clusters``.
+    max_radius : float or None, default=None
+        Cap on the chosen radius (ignored when ``radius`` is given): where
+        ``n_clusters`` would need a wider one, the clusters at ``max_radius`` are
+        returned, more than ``n_clusters`` of them.
     min_cluster_size : int, default=4
         Components with fewer points are left out (label ``-1``).
     n_neighbors : int, default=6
@@ -934,6 +946,11 @@ def euclidean_clustering(
         radius, components, reached = _radius_for_count(
             points, n_clusters, min_cluster_size, n_neighbors, workers
         )
+        if max_radius is not None and radius > max_radius:
+            # Far-apart objects: joining them into n_clusters would need gaps wider than
+            # the cap allows; more clusters, each max_radius-connected, instead.
+            radius, reached = max_radius, True
+            components = tau_components(points, max_radius)[1]
         if not reached:
             found = int(np.count_nonzero(np.bincount(components) >= min_cluster_size))
             warnings.warn(
@@ -970,6 +987,14 @@ class EuclideanClustering(PartitionInitializer):
     radius : float or None, default=None
         Largest gap within a cluster, in the units of the points. None chooses it from
         ``n_clusters``.
+    max_radius : float or None, default=None
+        Cap on the automatic radius. Where ``n_clusters`` clusters would need a wider
+        one (objects farther apart than the cap, fewer than ``n_clusters`` clusters
+        within it), the clusters at ``max_radius`` are returned instead, more than
+        ``n_clusters`` of them: with the registration's ``tau`` as the cap, every
+        initial cluster is ``tau``-connected, as Definition 2 of the paper asks, and
+        single linkage does not join hundreds of far-apart objects into one cluster.
+        Ignored when ``radius`` is given. None: no cap.
     min_cluster_size : int, default=4
         Components with fewer points get label ``-1``: no initial cluster. The EM does not
         fit poses to them but offers them to every cluster within ``tau`` at once. The
@@ -1042,16 +1067,25 @@ class EuclideanClustering(PartitionInitializer):
     _parameter_constraints: dict = {
         "n_clusters": [Interval(Integral, 1, None, closed="left"), None],
         "radius": [Interval(Real, 0, None, closed="left"), None],
+        "max_radius": [Interval(Real, 0, None, closed="neither"), None],
         "min_cluster_size": [Interval(Integral, 1, None, closed="left")],
         "n_neighbors": [Interval(Integral, 1, None, closed="left")],
         "n_jobs": [Integral, None],
     }
 
     def __init__(
-        self, n_clusters=100, *, radius=None, min_cluster_size=4, n_neighbors=6, n_jobs=None
+        self,
+        n_clusters=100,
+        *,
+        radius=None,
+        max_radius=None,
+        min_cluster_size=4,
+        n_neighbors=6,
+        n_jobs=None,
     ):
         self.n_clusters = n_clusters
         self.radius = radius
+        self.max_radius = max_radius
         self.min_cluster_size = min_cluster_size
         self.n_neighbors = n_neighbors
         self.n_jobs = n_jobs
@@ -1079,6 +1113,7 @@ class EuclideanClustering(PartitionInitializer):
             points,
             n_clusters=self.n_clusters,
             radius=self.radius,
+            max_radius=self.max_radius,
             min_cluster_size=self.min_cluster_size,
             n_neighbors=self.n_neighbors,
             n_jobs=self.n_jobs,

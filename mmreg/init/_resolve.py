@@ -10,12 +10,12 @@ from mmreg.init._base import BaseInitializer
 __all__ = ["INIT_CONSTRAINT", "INIT_SHORTCUTS", "initial_labels"]
 
 
-def _shortcuts():
+def _shortcuts(tau=None):
     # Imported here so that a shortcut's module loads only when it is used.
     from mmreg.init import DBSCANClustering, EuclideanClustering
 
     return {
-        "euclidean": lambda: EuclideanClustering(n_clusters=100),
+        "euclidean": lambda: EuclideanClustering(n_clusters=100, max_radius=tau),
         "dbscan": DBSCANClustering,
     }
 
@@ -26,13 +26,14 @@ INIT_SHORTCUTS = ("euclidean", "dbscan")
 INIT_CONSTRAINT = [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"]
 
 
-def initial_labels(init, X, *, random_state=None, n_jobs=None):
+def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None):
     """Initial clusters of the correspondences ``X = [a | b]``.
 
     Parameters
     ----------
     init : str, clusterer or array-like of shape (n,)
-        ``"euclidean"`` (:class:`~mmreg.init.EuclideanClustering` with 100 clusters) or
+        ``"euclidean"`` (:class:`~mmreg.init.EuclideanClustering` with 100 clusters and
+        its radius capped at ``tau``) or
         ``"dbscan"`` (:class:`~mmreg.init.DBSCANClustering`); an mmreg initialiser, fitted
         on ``X``; any other object with ``fit_predict`` (every scikit-learn clusterer),
         fitted on the a-points ``X[:, :d]``; or precomputed labels, one per row of ``X``
@@ -45,6 +46,10 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None):
         Given, likewise, to a cloned clusterer whose own ``n_jobs`` is None (the
         shortcuts included): the registration estimator's threads for its neighbour
         queries.
+    tau : float or None, default=None
+        The registration's gate: the ``"euclidean"`` shortcut's radius never exceeds
+        it, so that every initial cluster is ``tau``-connected (Definition 2). None: no
+        cap. Clusterers given as objects are used as they are.
 
     Returns
     -------
@@ -52,7 +57,7 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None):
     """
     n, n_columns = X.shape
     if isinstance(init, str):
-        makers = _shortcuts()
+        makers = _shortcuts(tau)
         if init not in makers:
             raise ValueError(
                 f"init={init!r} is not a known shortcut; use one of {sorted(makers)}, "
