@@ -412,7 +412,6 @@ def test_many_far_apart_objects():
         assert labels.max() + 1 == n_clusters
 
 
-
 def test_max_radius_keeps_far_apart_objects_apart():
     # 60 objects 6 m apart (gaps between them of at least 3 m): 10 clusters need gaps of
     # 6 m; capped at 2 m, every object is a cluster of its own, exactly the components
@@ -431,6 +430,7 @@ def test_max_radius_keeps_far_apart_objects_apart():
     wide = EuclideanClustering(10, max_radius=2 * uncapped.radius_).fit(X)
     assert wide.radius_ == uncapped.radius_
     np.testing.assert_array_equal(wide.labels_, uncapped.labels_)
+
 
 @pytest.mark.parametrize("n_neighbors", [1, 2, 6])
 def test_many_small_trees(n_neighbors):

@@ -116,7 +116,6 @@ def test_no_cluster_below_min_cluster_size():
     assert robust.outlier_mask_[scene.labels < 0].mean() >= 0.99
 
 
-
 def test_a_thousand_small_far_apart_objects_are_a_thousand_clusters():
     # 1,000 objects of 20 correspondences, 6 m apart, each with a motion of its own. The
     # 100 initial clusters asked for would need 6 m gaps, and single linkage then joins
