@@ -21,6 +21,7 @@ __all__ = [
     "query_workers",
     "radius_graph",
     "shortest_edges_between_components",
+    "touching_groups",
 ]
 
 # Bounding boxes prune the searches between components up to this many components; each
@@ -66,6 +67,42 @@ class NeighbourTable:
             return self.distance[rows, :k], self.index[rows, :k]
         distance, index = self.tree.query(self.points[rows], k=k, workers=self.workers)
         return distance.reshape(len(rows), k), index.reshape(len(rows), k)
+
+    def nearest_among(self, rows, among):
+        """Distance from each of ``rows`` to its nearest other point where ``among``.
+
+        Read off the table where one of a row's ``k`` neighbours qualifies (the first
+        that does is the nearest: the table is exact and sorted); a KD-tree of the
+        qualifying points answers the rest. The distances are those a KD-tree of the
+        qualifying points alone would give. ``inf`` where no other point qualifies.
+
+        Parameters
+        ----------
+        rows : ndarray of int
+        among : ndarray of bool of shape (n,)
+        """
+        rows = np.asarray(rows, dtype=np.intp)
+        out = np.full(len(rows), np.inf)
+        if not len(rows):
+            return out
+        index = self.index[rows]
+        listed = among[index] & (index != rows[:, None])
+        first = np.argmax(listed, axis=1)
+        found = listed[np.arange(len(rows)), first]
+        out[found] = self.distance[rows[found], first[found]]
+        rest = rows[~found]
+        pool = np.flatnonzero(among)
+        if len(rest) and len(pool):
+            k = min(2, len(pool))
+            distance, index = cKDTree(self.points[pool]).query(
+                self.points[rest], k=k, workers=self.workers
+            )
+            distance = distance.reshape(len(rest), k)
+            other = pool[index.reshape(len(rest), k)] != rest[:, None]
+            first = np.argmax(other, axis=1)
+            hit = other[np.arange(len(rest)), first]
+            out[np.flatnonzero(~found)[hit]] = distance[hit, first[hit]]
+        return out
 
 
 def query_workers(n_jobs):
@@ -309,3 +346,81 @@ def shortest_edges_between_components(points, components, *, workers=1):
     first[1:] = components[source[order[1:]]] != components[source[order[:-1]]]
     keep = order[first]
     return np.column_stack([source[keep], target[keep]]), dist[keep]
+
+
+def touching_groups(points, labels, radius):
+    """Pairs of groups ``(i, j)``, ``i < j``, with a point of each within ``radius``.
+
+    The pairs of :meth:`scipy.spatial.cKDTree.query_pairs` whose two points lie in
+    different groups, without listing the pairs within a group, which are nearly all of
+    them when ``radius`` spans a few sampling gaps. Two points within ``radius`` lie in
+    the same or adjacent cells of a grid of that side, so only the points of cells next
+    to (or holding) another group's points go to ``query_pairs``.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    labels : ndarray of shape (n,)
+        Non-negative group of each point.
+    radius : float
+
+    Returns
+    -------
+    pairs : ndarray of shape (m, 2)
+        Sorted rows, each pair once.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._neighbors import touching_groups
+    >>> points = np.array([[0.0, 0], [1, 0], [2, 0], [3, 0], [9, 0]])
+    >>> touching_groups(points, np.array([0, 0, 1, 2, 3]), 1.0)
+    array([[0, 1],
+           [1, 2]])
+    """
+    points = np.asarray(points, dtype=float)
+    labels = np.asarray(labels, dtype=np.intp)
+    near = _next_to_another_group(points, labels, radius)
+    rows = np.flatnonzero(near)
+    pairs = cKDTree(points[rows]).query_pairs(radius, output_type="ndarray")
+    pairs = labels[rows[pairs]].reshape(-1, 2)
+    pairs = np.sort(pairs[pairs[:, 0] != pairs[:, 1]], axis=1)
+    return np.unique(pairs, axis=0)
+
+
+def _next_to_another_group(points, labels, radius):
+    """Whether each point's grid cell (side just over ``radius``) or one adjacent to it
+    holds a point of another group; True everywhere when the grid cannot be used."""
+    n, d = points.shape
+    everywhere = np.ones(n, dtype=bool)
+    if n < 2 or not (0 < radius < np.inf) or d > 3:
+        return everywhere
+    # Cells a hair wider than the radius: rounding cannot put a pair within the radius
+    # two cells apart.
+    cells = np.floor((points - points.min(axis=0)) / (radius * (1 + 1e-6)))
+    shape = cells.max(axis=0) + 3
+    if not np.all(np.isfinite(shape)) or np.prod(shape) >= 2.0**62:
+        return everywhere
+    shape = shape.astype(np.int64)
+    codes = np.ravel_multi_index(tuple((cells + 1).astype(np.int64).T), shape)
+    cell_codes, cell_of = np.unique(codes, return_inverse=True)
+    cell_of = cell_of.ravel()
+    n_cells = len(cell_codes)
+    low = np.full(n_cells, np.iinfo(np.intp).max)
+    high = np.full(n_cells, -1)
+    np.minimum.at(low, cell_of, labels)
+    np.maximum.at(high, cell_of, labels)
+    # A cell is next to another group unless it and every occupied neighbour hold one
+    # and the same group.
+    flagged = low != high
+    strides = np.ravel_multi_index(np.ones(d, dtype=np.int64), shape)
+    for offset in np.ndindex(*(3,) * d):
+        step = np.ravel_multi_index(np.array(offset), shape) - strides
+        if step == 0:
+            continue
+        neighbour = np.searchsorted(cell_codes, cell_codes + step)
+        neighbour = np.minimum(neighbour, n_cells - 1)
+        occupied = cell_codes[neighbour] == cell_codes + step
+        other = occupied & ((low[neighbour] != low) | (high[neighbour] != high))
+        flagged |= other
+    return flagged[cell_of]

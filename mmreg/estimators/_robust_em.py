@@ -305,6 +305,7 @@ def robust_multi_model_em(
                     d,
                     sigma_floor,
                     tolerance=motion_tolerance,
+                    neighbours=neighbours,
                     workers=workers,
                 )
                 members = np.where(members >= 0, joined[np.maximum(members, 0)], -1)
@@ -449,6 +450,7 @@ def robust_multi_model_em(
                 d,
                 sigma_floor,
                 tolerance=motion_tolerance,
+                neighbours=neighbours,
                 workers=workers,
             )
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)

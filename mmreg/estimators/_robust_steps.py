@@ -27,7 +27,7 @@ from mmreg._connectivity import tau_components
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg._likelihood import morton_order
 from mmreg._moments import Moments, group_moments
-from mmreg._neighbors import NeighbourTable
+from mmreg._neighbors import NeighbourTable, touching_groups
 
 __all__ = [
     "ClusterModels",
@@ -672,7 +672,9 @@ def motion_size(models, clusters, static):
     return _motion_from(models.take(clusters), None)
 
 
-def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolerance=0.2, workers=1):
+def join_moving_pieces(
+    points, labels, models, static, d, sigma_floor, *, tolerance=0.2, neighbours=None, workers=1
+):
     """Merge touching moving clusters whose motions agree within ``tolerance`` of the motion.
 
     A scene-flow network errs on a moving object in proportion to its motion, and not
@@ -685,6 +687,8 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
     relative to the static world (to standing still when there is none: a camera's
     background split in pieces moves alike too). Cars in one lane move alike too, but
     do not touch.
+    ``neighbours``: a :class:`NeighbourTable` of ``points``, which saves the query of
+    the spacings.
 
     Returns
     -------
@@ -702,11 +706,13 @@ def join_moving_pieces(points, labels, models, static, d, sigma_floor, *, tolera
     if len(rows) < 2:
         return root, models, 0
     pts, own = points[rows], labels[rows]
-    tree = cKDTree(pts)
-    nearest, _ = tree.query(pts, k=2, workers=workers)
-    pairs = tree.query_pairs(3.0 * float(np.median(nearest[:, 1])), output_type="ndarray")
-    pairs = own[pairs]
-    pairs = np.unique(np.sort(pairs[pairs[:, 0] != pairs[:, 1]], axis=1), axis=0)
+    if neighbours is None:
+        spacing = cKDTree(pts).query(pts, k=2, workers=workers)[0][:, 1]
+    else:
+        moving = np.zeros(len(points), dtype=bool)
+        moving[rows] = True
+        spacing = neighbours.nearest_among(rows, moving)
+    pairs = touching_groups(pts, own, 3.0 * float(np.median(spacing)))
     if not len(pairs):
         return root, models, 0
     i, j = pairs[:, 0], pairs[:, 1]
