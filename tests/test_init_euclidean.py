@@ -11,6 +11,7 @@ from scipy.spatial.distance import cdist
 
 from mmreg._connectivity import cluster_components
 from mmreg._neighbors import (
+    NeighbourTable,
     minimum_spanning_forest,
     nearest_in_other_component,
     shortest_edges_between_components,
@@ -483,3 +484,26 @@ def test_closest_pair_on_the_bounding_boxes():
     labels, radius = euclidean_clustering(points, n_clusters=1, min_cluster_size=1, n_neighbors=1)
     assert labels.tolist() == [0, 0, 0, 0]
     assert same_partition(labels, reference_labels(points, radius, 1))
+
+
+@pytest.mark.filterwarnings("ignore:No radius tried")
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_clusters=st.sampled_from([1, 5, 40]),
+    lattice=st.booleans(),
+)
+def test_a_neighbour_table_read_instead_of_the_query_gives_the_same_clusters(
+    seed, n_clusters, lattice
+):
+    # On a lattice many neighbours are equidistant, and the table (16 per point) may
+    # list other ones among them than the init's own 7-neighbour query: the single
+    # linkage, the radius and so the clusters are the same.
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0, 30, size=(12, 3))
+    points = (centres[:, None] + rng.normal(scale=1.0, size=(12, 40, 3))).reshape(-1, 3)
+    if lattice:
+        points = np.round(points * 2) / 2
+    expected = euclidean_clustering(points, n_clusters=n_clusters)
+    got = euclidean_clustering(points, n_clusters=n_clusters, neighbours=NeighbourTable(points))
+    np.testing.assert_array_equal(got[0], expected[0])
+    assert got[1] == expected[1]

@@ -12,6 +12,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg._gate import ClusterGate
+from mmreg._neighbors import NeighbourTable
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
 from mmreg.estimators._robust_em import _FALSE_ALARMS, robust_multi_model_em
@@ -430,8 +431,19 @@ class MultiModelRegistration(BaseRegistration):
         X, a, b = self._validate_correspondences(X, reset=True)
         self._warn_if_tau_off_scale(a)
         workers = self._workers()
+        # The robust variants' neighbour table, listed once for the initial clusters too.
+        neighbours = (
+            NeighbourTable(a, workers=workers)
+            if self.variant != "paper" and "boundary_layers" not in self.skip_steps
+            else None
+        )
         self.init_labels_ = initial_labels(
-            self.init, X, random_state=self.random_state, n_jobs=self.n_jobs, tau=self.tau
+            self.init,
+            X,
+            random_state=self.random_state,
+            n_jobs=self.n_jobs,
+            tau=self.tau,
+            neighbours=neighbours,
         )
         # A refit with another variant must not keep the robust variants' attributes.
         for name in _ROBUST_ATTRIBUTES:
@@ -467,6 +479,7 @@ class MultiModelRegistration(BaseRegistration):
                 tol=(5e-3 if self.variant == "sweep" else 1e-3) if self.tol is None else self.tol,
                 skip_steps=tuple(self.skip_steps),
                 sweep=self.variant == "sweep",
+                neighbours=neighbours,
                 random_state=self.random_state,
                 verbose=self.verbose,
                 workers=workers,

@@ -145,6 +145,7 @@ def robust_multi_model_em(
     tol=1e-3,
     skip_steps=(),
     sweep=False,
+    neighbours=None,
     random_state=None,
     verbose=0,
     workers=1,
@@ -191,6 +192,9 @@ def robust_multi_model_em(
         proposals that search the noise scale and also try local translations, slow
         movers sought in the static world's tail, and the outlier weight capped at one
         half. False: one shared noise scale and none of these (the robust default).
+    neighbours : NeighbourTable or None, default=None
+        The a-points' 16 nearest neighbours, if the caller has listed them; None lists
+        them here (when the boundary layers step runs, the only one that reads them).
     random_state : int, RandomState instance or None, default=None
         Seeds the proposals' samples.
     verbose : int, default=0
@@ -219,7 +223,10 @@ def robust_multi_model_em(
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
-    neighbours = NeighbourTable(a, workers=workers) if run["boundary_layers"] else None
+    if not run["boundary_layers"]:
+        neighbours = None
+    elif neighbours is None:
+        neighbours = NeighbourTable(a, workers=workers)
     # The sweep variant reads the spacing off the table; the robust default keeps its own
     # k=6 query, whose ties among equidistant neighbours may order apart from the
     # table's, so that its labels stay as they were.

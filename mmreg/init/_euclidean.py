@@ -81,19 +81,25 @@ def _knn_edges(points, tree, n_neighbors, workers):
     return edges, dist.ravel(), reach
 
 
-def _knn_forest(points, tree, n_neighbors, workers):
+def _knn_forest(points, tree, n_neighbors, workers, neighbours=None):
     """Minimum spanning forest of the k-NN graph (by length) and each point's reach.
 
     The same forest as :func:`minimum_spanning_forest` of :func:`_knn_edges`, with the
     graph handed to the spanning-tree algorithm row by row as the query returns it
-    rather than sorted from a list of edges.
+    rather than sorted from a list of edges. ``neighbours``: a :class:`NeighbourTable`
+    of ``points`` with at least ``n_neighbors + 1`` columns, read instead of querying
+    (equidistant neighbours may be listed apart from the query's: the single linkage,
+    and the radius chosen from it, are the same).
     """
     n = len(points)
     k = min(n_neighbors + 1, n)
-    # Queries in the tree's own order touch memory in order: much faster for large n.
     order = tree.indices
-    dist, idx = tree.query(points[order], k=k, workers=workers)
-    dist, idx = dist.reshape(n, k), idx.reshape(n, k)
+    if neighbours is not None and neighbours.k >= k:
+        dist, idx = neighbours.distance[order, :k], neighbours.index[order, :k]
+    else:
+        # Queries in the tree's own order touch memory in order: much faster for large n.
+        dist, idx = tree.query(points[order], k=k, workers=workers)
+        dist, idx = dist.reshape(n, k), idx.reshape(n, k)
     reach = np.full(n, np.inf)
     if k < n:
         reach[order] = dist[:, -1]
@@ -834,11 +840,18 @@ def _add_to_forest(n_points, forest, forest_lengths, edges, lengths):
 
 
 def _radius_for_count(
-    points, n_clusters, min_cluster_size, n_neighbors, workers, *, complete_all=False
+    points,
+    n_clusters,
+    min_cluster_size,
+    n_neighbors,
+    workers,
+    *,
+    complete_all=False,
+    neighbours=None,
 ):
     n = len(points)
-    tree = cKDTree(points)
-    forest, forest_lengths, reach = _knn_forest(points, tree, n_neighbors, workers)
+    tree = cKDTree(points) if neighbours is None else neighbours.tree
+    forest, forest_lengths, reach = _knn_forest(points, tree, n_neighbors, workers, neighbours)
     # The grid cells of the points, for the searches between components: made once, if
     # any is needed.
     zorder = functools.cache(lambda: _ZOrder(points, _pyramid_cell(reach)))
@@ -881,7 +894,13 @@ def _radius_for_count(
     if complete_all:  # pragma: no cover - a completed forest is one tree
         raise RuntimeError("the completed forest did not let the radius be chosen")
     return _radius_for_count(
-        points, n_clusters, min_cluster_size, n_neighbors, workers, complete_all=True
+        points,
+        n_clusters,
+        min_cluster_size,
+        n_neighbors,
+        workers,
+        complete_all=True,
+        neighbours=neighbours,
     )
 
 
@@ -894,6 +913,7 @@ def euclidean_clustering(
     min_cluster_size=4,
     n_neighbors=6,
     n_jobs=None,
+    neighbours=None,
 ):
     """Euclidean cluster extraction on points, with a given or an automatic radius.
 
@@ -917,6 +937,9 @@ def euclidean_clustering(
         Neighbours per point in the k-NN graph that seeds the radius search.
     n_jobs : int or None, default=None
         Threads for the k-NN queries; None means 1, -1 all processors.
+    neighbours : NeighbourTable or None, default=None
+        The ``points``' nearest neighbours, already listed (at least ``n_neighbors +
+        1``, as a caller that needs them anyway has them): read instead of a query.
 
     Returns
     -------
@@ -944,7 +967,7 @@ def euclidean_clustering(
     else:
         workers = query_workers(n_jobs)
         radius, components, reached = _radius_for_count(
-            points, n_clusters, min_cluster_size, n_neighbors, workers
+            points, n_clusters, min_cluster_size, n_neighbors, workers, neighbours=neighbours
         )
         if max_radius is not None and radius > max_radius:
             # Far-apart objects: joining them into n_clusters would need gaps wider than

@@ -26,7 +26,7 @@ INIT_SHORTCUTS = ("euclidean", "dbscan")
 INIT_CONSTRAINT = [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"]
 
 
-def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None):
+def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None, neighbours=None):
     """Initial clusters of the correspondences ``X = [a | b]``.
 
     Parameters
@@ -50,6 +50,9 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None):
         The registration's gate: the ``"euclidean"`` shortcut's radius never exceeds
         it, so that every initial cluster is ``tau``-connected (Definition 2). None: no
         cap. Clusterers given as objects are used as they are.
+    neighbours : NeighbourTable or None, default=None
+        The a-points' nearest neighbours, when the caller has them: the ``"euclidean"``
+        shortcut reads them instead of querying them again.
 
     Returns
     -------
@@ -64,6 +67,15 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None):
                 "a clusterer with fit_predict, or an array of initial labels."
             )
         init = makers[init]()
+        if neighbours is not None and init.__class__.__name__ == "EuclideanClustering":
+            # The same clusters as its fit, from the neighbours the caller has listed.
+            from mmreg.init import euclidean_clustering
+
+            params = init.get_params() | {"n_jobs": n_jobs}
+            labels, _ = euclidean_clustering(
+                X[:, : n_columns // 2], **params, neighbours=neighbours
+            )
+            return check_labels(labels, n, name="labels from init")
     if hasattr(init, "fit_predict"):
         if isinstance(init, type):
             raise TypeError(f"init must be an instance, not the class {init.__name__}.")
