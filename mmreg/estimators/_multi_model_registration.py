@@ -44,16 +44,22 @@ class ScaleWarning(UserWarning):
     """``tau`` does not fit the scale of the points (are they in other units?)."""
 
 
-def median_spacing(points, random_state=0):
-    """Median distance from an a-point to its nearest neighbour (on a sample of them)."""
+def median_spacing(points, random_state=0, neighbours=None):
+    """Median distance from an a-point to its nearest neighbour (on a sample of them).
+
+    ``neighbours``: a :class:`~mmreg._neighbors.NeighbourTable` of ``points``, read
+    instead of a KD-tree query (the same distances).
+    """
     points = np.asarray(points, dtype=float)
     if len(points) < 2:
         return 0.0
     rng = check_random_state(random_state)
-    sample = points
+    sample = np.arange(len(points))
     if len(points) > _SPACING_SAMPLE:
-        sample = points[rng.choice(len(points), _SPACING_SAMPLE, replace=False)]
-    dist, _ = cKDTree(points).query(sample, k=2)
+        sample = rng.choice(len(points), _SPACING_SAMPLE, replace=False)
+    if neighbours is not None and neighbours.k >= 2:
+        return float(np.median(neighbours.distance[sample, 1]))
+    dist, _ = cKDTree(points).query(points[sample], k=2)
     return float(np.median(dist[:, 1]))
 
 
@@ -429,7 +435,6 @@ class MultiModelRegistration(BaseRegistration):
             The fitted estimator.
         """
         X, a, b = self._validate_correspondences(X, reset=True)
-        self._warn_if_tau_off_scale(a)
         workers = self._workers()
         # The robust variants' neighbour table, listed once for the initial clusters too.
         neighbours = (
@@ -437,6 +442,7 @@ class MultiModelRegistration(BaseRegistration):
             if self.variant != "paper" and "boundary_layers" not in self.skip_steps
             else None
         )
+        self._warn_if_tau_off_scale(a, neighbours)
         self.init_labels_ = initial_labels(
             self.init,
             X,
@@ -510,10 +516,10 @@ class MultiModelRegistration(BaseRegistration):
             )
         return self
 
-    def _warn_if_tau_off_scale(self, a):
+    def _warn_if_tau_off_scale(self, a, neighbours=None):
         if self.tau is None:
             return
-        spacing = median_spacing(a)
+        spacing = median_spacing(a, neighbours=neighbours)
         if self.tau < _MIN_GATE_SPACINGS * spacing:
             warnings.warn(
                 f"tau={self.tau:g} spans fewer than {_MIN_GATE_SPACINGS:g} times the median "
