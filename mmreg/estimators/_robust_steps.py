@@ -24,6 +24,7 @@ from scipy.special import gamma
 from scipy.stats import binom, chi2
 
 from mmreg._connectivity import tau_components
+from mmreg._grouping import sorted_within_groups
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg._likelihood import morton_order
 from mmreg._moments import Moments, group_moments
@@ -249,12 +250,9 @@ def group_median(values, labels, n_groups):
     out = np.full(n_groups, np.nan)
     if not len(rows):
         return out
-    own = labels[rows]
-    order = np.lexsort((values[rows], own))
-    counts = np.bincount(own, minlength=n_groups)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    sorted_values, starts, counts = sorted_within_groups(values[rows], labels[rows], n_groups)
     full = np.flatnonzero(counts > 0)
-    out[full] = values[rows][order][starts[full] + (counts[full] - 1) // 2]
+    out[full] = sorted_values[starts[full] + (counts[full] - 1) // 2]
     return out
 
 
@@ -916,12 +914,7 @@ def boundary_layers(
         neighbours = NeighbourTable(points)
     own = labels[rows]
     counts = np.bincount(own, minlength=n_clusters)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    full = np.flatnonzero(counts > 0)
-    typical = np.zeros(n_clusters)
-    spacing_order = np.lexsort((spacing[rows], own))
-    typical[full] = spacing[rows][spacing_order][starts[full] + (counts[full] - 1) // 2]
-    limit = thickness * typical
+    limit = thickness * np.nan_to_num(group_median(spacing, labels, n_clusters))
     # A cluster is a layer when its median gap is within its limit: when at least this
     # many of its points have a foreign point within the limit.
     needed = (counts - 1) // 2 + 1

@@ -1,0 +1,34 @@
+"""Values sorted within groups, and the per-group medians built on that order."""
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from mmreg._grouping import sorted_within_groups
+from mmreg.estimators._robust_steps import group_median
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.sampled_from([1, 7, 500]),
+    n_groups=st.sampled_from([1, 3, 40, 40_000]),
+    ties=st.booleans(),
+)
+def test_the_order_of_a_lexsort_and_lower_medians(seed, n, n_groups, ties):
+    rng = np.random.default_rng(seed)
+    values = rng.normal(size=n)
+    if ties:
+        values = np.round(values)
+    groups = rng.integers(n_groups, size=n)
+    sorted_values, starts, counts = sorted_within_groups(values, groups, n_groups)
+    np.testing.assert_array_equal(sorted_values, values[np.lexsort((values, groups))])
+    np.testing.assert_array_equal(counts, np.bincount(groups, minlength=n_groups))
+    np.testing.assert_array_equal(starts, np.cumsum(counts) - counts)
+    labels = np.where(rng.random(n) < 0.2, -1, groups)  # some in no group
+    expected = [
+        np.sort(values[labels == g])[(np.sum(labels == g) - 1) // 2]
+        if np.any(labels == g)
+        else np.nan
+        for g in range(min(n_groups, 50))
+    ]
+    np.testing.assert_array_equal(group_median(values, labels, n_groups)[:50], expected)
