@@ -122,7 +122,9 @@ class MultiModelRegistration(BaseRegistration):
         ``min_motion``), touching moving pieces whose motions agree within
         ``motion_tolerance`` of their motion are one object, proposals search the noise
         scale (as MAGSAC marginalises it) and try local translations, slow movers are
-        sought in the static world's tail, and the outliers are judged once more by the
+        sought in the static world's tail, a cluster whose members lie scattered among
+        other clusters' points (a few wrong flows that agree by chance, with a noise
+        scale of their own) is dissolved, and the outliers are judged once more by the
         final clusters. ``"robust"``: the robust loop with one noise scale shared by all
         clusters and none of these (the default before 0.4). ``"paper"``: Algorithm 1
         exactly as published (bit for bit the results of

@@ -10,7 +10,9 @@ correspondence to its most likely cluster within the gate); the named steps of
 3. the static world (:func:`merge_static_world`): the dominant motion gathers every
    piece that moves with it, however far apart, into one cluster that the gate of eq. (7)
    admits everywhere;
-4. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`);
+4. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
+   in the sweep variant, clusters whose members lie scattered among other clusters'
+   points (:func:`scattered_clusters`): neither has a body of its own;
 5. removal of small clusters (Algorithm 1, lines 10-13);
 6. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
    correspondence's noise scale ``sigma_j g_i`` growing with its range when the data say
@@ -50,6 +52,7 @@ from mmreg.estimators._robust_steps import (
     propose_clusters,
     range_noise_scale,
     reject_outliers,
+    scattered_clusters,
     squared_residuals,
     trimmed_fit,
 )
@@ -251,7 +254,7 @@ def robust_multi_model_em(
     own_scales = sweep
 
     def layers_of(labels, n_clusters):
-        return boundary_layers(
+        layers = boundary_layers(
             a,
             labels,
             n_clusters,
@@ -260,6 +263,11 @@ def robust_multi_model_em(
             neighbours=neighbours,
             ignore_strays=sweep,
         )
+        if not sweep:
+            return layers
+        # With a noise scale of their own, a few scattered wrong flows can hold a motion.
+        scattered = scattered_clusters(labels, n_clusters, neighbours, exempt=static)
+        return np.union1d(layers, scattered)
 
     def fit(labels, n_clusters):
         return trimmed_fit(

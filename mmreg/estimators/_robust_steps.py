@@ -946,6 +946,38 @@ def boundary_layers(
     return np.flatnonzero(layers)
 
 
+def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
+    """Clusters without a body of their own: most of their members are strays.
+
+    A member is a stray when fewer than a quarter of its nearest neighbours (the ``k -
+    1`` that ``neighbours`` lists, or as many as its cluster has other members if fewer)
+    belong to its cluster. An object, however small, is a body of points nearer each
+    other than the points around it: even with wrong flows and bled flows on it and
+    around it, its members have many of their own among their neighbours.
+    Correspondences that only share a motion while scattered among other points are
+    not: a few of a blob of wrong flows that agree within a noise that grows with range,
+    spread over metres of the static world. Not applied to ``exempt`` (the static world).
+
+    Returns
+    -------
+    clusters : ndarray
+        Indices of the clusters more than half of whose members are strays.
+    """
+    rows = np.flatnonzero((labels >= 0) & (labels != exempt))
+    if not len(rows):
+        return np.empty(0, dtype=np.intp)
+    own = labels[rows]
+    size = np.bincount(own, minlength=n_clusters)
+    listed = labels[neighbours.index[rows, 1:]]
+    depth = np.minimum(listed.shape[1], size[own] - 1)
+    mine = np.cumsum(listed == own[:, None], axis=1)
+    looked = np.flatnonzero(depth > 0)
+    stray = np.zeros(len(rows), dtype=bool)
+    stray[looked] = 4 * mine[looked, depth[looked] - 1] < depth[looked]
+    n_strays = np.bincount(own[stray], minlength=n_clusters)
+    return np.flatnonzero(2 * n_strays > size)
+
+
 def drop_small_clusters(labels, counts, min_cluster_size):
     """Labels with the clusters below ``min_cluster_size`` dissolved (-1), renumbered."""
     kept = counts >= min_cluster_size
