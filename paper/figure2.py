@@ -139,7 +139,7 @@ def suptitle(dataset, results, real):
     return (
         f"Fig. 2 ({'a' if dataset == 'flying_things' else 'b'}) reproduced: {source}; "
         f"{runs} scenes{size}, scene-flow errors incl. 10 % gross errors.\n"
-        f"Ours = Algorithm 1 (tau = {TAU:g} m, m_min = 4, T = 10); mmreg = robust default "
+        f"Ours = Algorithm 1 (tau = {TAU:g} m, m_min = 4, T = 10); mmreg = the default "
         f"(tau = {TAU:g} m); T-L: tau_t = {TAU_T:g} m; SeqR: threshold {RANSAC_THRESHOLD:g} m, "
         "1000 trials. SAM = SAM-like masks, Euc. = Euclidean clustering (100 clusters).\n"
         "Boxes: quartiles and median, whiskers 1.5 IQR; dots: one per scene."

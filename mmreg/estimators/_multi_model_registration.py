@@ -126,7 +126,7 @@ class MultiModelRegistration(BaseRegistration):
         other clusters' points (a few wrong flows that agree by chance, with a noise
         scale of their own) is dissolved, and the outliers are judged once more by the
         final clusters. ``"robust"``: the robust loop with one noise scale shared by all
-        clusters and none of these (the default before 0.4). ``"paper"``: Algorithm 1
+        clusters and none of these (the earlier default). ``"paper"``: Algorithm 1
         exactly as published (bit for bit the results of
         :func:`~mmreg.estimators.multi_model_em`).
     confidence : float in (0, 1), default=0.999
