@@ -2,12 +2,14 @@
 slow pieces, the outliers judged by a false-alarm rate, and clusters scattered among others."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mmreg import MultiModelRegistration
 from mmreg._neighbors import NeighbourTable
 from mmreg.datasets import make_street
+from mmreg.estimators import _robust_steps as robust_steps
 from mmreg.estimators._robust_steps import (
     estimate_range_growth,
     fit_clusters,
@@ -139,6 +141,9 @@ def test_scattered_members_are_no_object_and_a_small_body_is_one(seed, wrong):
     labels[4000:4040][rng.random(40) < wrong] = -1
     table = NeighbourTable(points)
     np.testing.assert_array_equal(scattered_clusters(labels, 4, table, exempt=0), [1])
+    with pytest.MonkeyPatch.context() as patch:  # many blocks give the same answer
+        patch.setattr(robust_steps, "_BLOCK_ROWS", 1000)
+        np.testing.assert_array_equal(scattered_clusters(labels, 4, table, exempt=0), [1])
     # The static world is never dissolved, whatever its shape.
     assert 0 not in scattered_clusters(labels, 4, table, exempt=0)
 

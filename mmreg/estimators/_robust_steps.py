@@ -946,6 +946,10 @@ def boundary_layers(
     return np.flatnonzero(layers)
 
 
+# Rows per block of the neighbour-label passes of scattered_clusters.
+_BLOCK_ROWS = 1 << 16
+
+
 def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
     """Clusters without a body of their own: most of their members are strays.
 
@@ -968,12 +972,16 @@ def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
         return np.empty(0, dtype=np.intp)
     own = labels[rows]
     size = np.bincount(own, minlength=n_clusters)
-    listed = labels[neighbours.index[rows, 1:]]
-    depth = np.minimum(listed.shape[1], size[own] - 1)
-    mine = np.cumsum(listed == own[:, None], axis=1)
-    looked = np.flatnonzero(depth > 0)
+    depth = np.minimum(neighbours.k - 1, size[own] - 1)
     stray = np.zeros(len(rows), dtype=bool)
-    stray[looked] = 4 * mine[looked, depth[looked] - 1] < depth[looked]
+    # In blocks: a row's neighbours' labels and their running count stay small in memory.
+    for start in range(0, len(rows), _BLOCK_ROWS):
+        block = slice(start, start + _BLOCK_ROWS)
+        listed = labels[neighbours.index[rows[block], 1:]]
+        mine = np.cumsum(listed == own[block, None], axis=1, dtype=np.int16)
+        looked = np.flatnonzero(depth[block] > 0)
+        reach = depth[block][looked]
+        stray[start + looked] = 4 * mine[looked, reach - 1] < reach
     n_strays = np.bincount(own[stray], minlength=n_clusters)
     return np.flatnonzero(2 * n_strays > size)
 
