@@ -1,11 +1,13 @@
 """boundary_layers against a plain reading of its definition (all pairwise distances)."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
 from mmreg._neighbors import NeighbourTable
+from mmreg.estimators import _robust_steps as robust_steps
 from mmreg.estimators._robust_steps import boundary_layers
 
 
@@ -58,6 +60,19 @@ def test_boundary_layers_match_the_definition(seed, n, n_clusters, gridded, exem
     )
     expected = reference_layers(points, labels, n_clusters, spacing, thickness, exempt)
     np.testing.assert_array_equal(got, expected)
+    # Rows taken in blocks (as at a million points) give the same layers.
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(robust_steps, "_BLOCK_ROWS", 7)
+        blocked = boundary_layers(
+            points,
+            labels,
+            n_clusters,
+            spacing,
+            thickness=thickness,
+            exempt=exempt,
+            neighbours=table,
+        )
+    np.testing.assert_array_equal(blocked, expected)
 
 
 def test_a_layer_along_a_surface_is_found_and_an_object_beside_it_is_not():

@@ -852,6 +852,11 @@ def _concatenate_moments(first, second):
     )
 
 
+# Rows per block of the passes over every point's neighbours (boundary_layers,
+# scattered_clusters): n x 16 arrays at once cost hundreds of MB at a million points.
+_BLOCK_ROWS = 1 << 16
+
+
 def boundary_layers(
     points,
     labels,
@@ -923,8 +928,13 @@ def boundary_layers(
         candidate[exempt] = False
     counted = labels.copy()
     if ignore_strays:
-        others = labels[neighbours.index[:, 1:]]
-        alone = 2 * np.count_nonzero(others == labels[:, None], axis=1) < others.shape[1]
+        alone = np.zeros(len(labels), dtype=bool)
+        # In blocks: the neighbours' labels of every point at once are n x 15 integers.
+        for start in range(0, len(labels), _BLOCK_ROWS):
+            block = slice(start, start + _BLOCK_ROWS)
+            others = labels[neighbours.index[block, 1:]]
+            same = np.count_nonzero(others == labels[block, None], axis=1)
+            alone[block] = 2 * same < others.shape[1]
         counted[alone] = -1
     near = np.zeros(n_clusters, dtype=np.intp)
     pending = rows[candidate[own]]
@@ -932,11 +942,17 @@ def boundary_layers(
     while len(pending):
         cluster = labels[pending]
         reach = limit[cluster]
-        distance, index = neighbours.nearest(pending, k)
-        others = counted[index]
-        foreign = (others >= 0) & (others != cluster[:, None]) & (distance <= reach[:, None])
-        settled_near = foreign.any(axis=1)
-        open_ = ~settled_near & (distance[:, -1] <= reach) & (k < len(neighbours))
+        settled_near = np.zeros(len(pending), dtype=bool)
+        reaches = np.zeros(len(pending), dtype=bool)  # the k-th neighbour within reach
+        for start in range(0, len(pending), _BLOCK_ROWS):
+            block = slice(start, start + _BLOCK_ROWS)
+            distance, index = neighbours.nearest(pending[block], k)
+            others = counted[index]
+            within = distance <= reach[block, None]
+            foreign = (others >= 0) & (others != cluster[block, None]) & within
+            settled_near[block] = foreign.any(axis=1)
+            reaches[block] = within[:, -1]
+        open_ = ~settled_near & reaches & (k < len(neighbours))
         near += np.bincount(cluster[settled_near], minlength=n_clusters)
         still_open = np.bincount(cluster[open_], minlength=n_clusters)
         undecided = (near < needed) & (near + still_open >= needed)
@@ -944,10 +960,6 @@ def boundary_layers(
         k *= 4
     layers = candidate & (near >= needed)
     return np.flatnonzero(layers)
-
-
-# Rows per block of the neighbour-label passes of scattered_clusters.
-_BLOCK_ROWS = 1 << 16
 
 
 def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
