@@ -15,7 +15,7 @@ from mmreg._gate import ClusterGate
 from mmreg._neighbors import NeighbourTable
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
-from mmreg.estimators._robust_em import _FALSE_ALARMS, robust_multi_model_em
+from mmreg.estimators._robust_em import _FALSE_ALARMS, reads_neighbours, robust_multi_model_em
 from mmreg.estimators._robust_steps import judge_correspondences, range_noise_scale
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
@@ -441,7 +441,7 @@ class MultiModelRegistration(BaseRegistration):
         # The robust variants' neighbour table, listed once for the initial clusters too.
         neighbours = (
             NeighbourTable(a, workers=workers)
-            if self.variant != "paper" and "boundary_layers" not in self.skip_steps
+            if self.variant != "paper" and reads_neighbours(self.skip_steps)
             else None
         )
         self._warn_if_tau_off_scale(a, neighbours)

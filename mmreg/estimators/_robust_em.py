@@ -57,7 +57,7 @@ from mmreg.estimators._robust_steps import (
     trimmed_fit,
 )
 
-__all__ = ["ROBUST_STEPS", "RobustEMResult", "robust_multi_model_em"]
+__all__ = ["ROBUST_STEPS", "RobustEMResult", "reads_neighbours", "robust_multi_model_em"]
 
 #: The steps around Algorithm 1 that ``skip_steps`` may turn off.
 ROBUST_STEPS = (
@@ -124,6 +124,11 @@ def _sampling_spacing(points, k=6, neighbours=None, workers=1):
     else:
         distance, index = cKDTree(points).query(points, k=min(k, n), workers=workers)
     return np.median(distance[:, 1][index], axis=1)
+
+
+def reads_neighbours(skip_steps):
+    """Whether the loop reads the a-points' neighbour table: its boundary layers do."""
+    return "boundary_layers" not in skip_steps
 
 
 def _weights(counts, n):
@@ -226,7 +231,7 @@ def robust_multi_model_em(
     labels, n_clusters = _compact_initial(init_labels)
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
-    if not run["boundary_layers"]:
+    if not reads_neighbours(skip_steps):
         neighbours = None
     elif neighbours is None:
         neighbours = NeighbourTable(a, workers=workers)

@@ -67,10 +67,10 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None, neighbo
                 "a clusterer with fit_predict, or an array of initial labels."
             )
         init = makers[init]()
-        if neighbours is not None and init.__class__.__name__ == "EuclideanClustering":
-            # The same clusters as its fit, from the neighbours the caller has listed.
-            from mmreg.init import euclidean_clustering
+        from mmreg.init import EuclideanClustering, euclidean_clustering
 
+        if neighbours is not None and isinstance(init, EuclideanClustering):
+            # The same clusters as its fit, from the neighbours the caller has listed.
             params = init.get_params() | {"n_jobs": n_jobs}
             labels, _ = euclidean_clustering(
                 X[:, : n_columns // 2], **params, neighbours=neighbours
