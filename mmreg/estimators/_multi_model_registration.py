@@ -167,12 +167,14 @@ class MultiModelRegistration(BaseRegistration):
         into its motion), so the object's parts fit different rigid motions. Objects
         that do not touch are never joined this way. 0 turns this off.
     tol : float in [0, 1) or None, default=None
-        Robust variants: the iterations have converged when one merges nothing and
-        moves at most this fraction of the correspondences to another reported cluster
-        (a proposal's or a joined piece's members count; a move between pieces of the
-        static world does not). None: 1e-3, and 5e-3 with ``variant="sweep"``, where a
-        network's flow moves a few tenths of a percent of the correspondences between
-        an object and the outliers every iteration without changing the answer.
+        Robust variants: the iterations have converged when one moves at most this
+        fraction of the correspondences to another reported cluster, the clusters of
+        two iterations matched by their overlap whatever their numbers (a merge moves
+        the smaller part's correspondences, a proposal its members, a move to or from
+        the outliers counts; a move between pieces of the static world does not). None:
+        1e-3, and 5e-3 with ``variant="sweep"``, where a network's flow moves a few
+        tenths of a percent of the correspondences between an object and the outliers
+        every iteration without changing the answer.
     skip_steps : tuple of str, default=()
         Robust variant: steps of the loop to leave out, for ablations; any of
         ``"trimming"``, ``"range_noise"``, ``"merging"``, ``"static_world"``,

@@ -27,6 +27,7 @@ them off the loop is Algorithm 1 with the static world's gate still in place.
 """
 
 from dataclasses import dataclass, field
+from itertools import compress
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -36,6 +37,7 @@ from sklearn.utils import check_random_state
 from mmreg._gate import ClusterGate
 from mmreg._likelihood import morton_order, single_threaded_blas
 from mmreg._neighbors import NeighbourTable
+from mmreg._relabelling import rows_moved
 from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
 from mmreg.estimators._robust_steps import (
     adjacent_pairs,
@@ -49,6 +51,7 @@ from mmreg.estimators._robust_steps import (
     merge_adjacent,
     merge_static_world,
     motion_beyond_scatter,
+    moves_slowly,
     propose_clusters,
     range_noise_scale,
     reject_outliers,
@@ -188,10 +191,12 @@ def robust_multi_model_em(
         Touching moving clusters whose motions agree within this fraction of their motion
         are one object (:func:`join_moving_pieces`).
     tol : float, default=1e-3
-        Converged when an iteration merges nothing and moves at most this fraction of
-        the correspondences to another reported cluster (a proposal's or a joined
-        piece's members count; a move between pieces of the static world does not; 0:
-        none, as Algorithm 1).
+        Converged when an iteration moves at most this fraction of the correspondences
+        to another reported cluster (:func:`~mmreg._relabelling.rows_moved`: the
+        clusters of two iterations matched by overlap, so that a merge moves the smaller
+        part's members and a proposal its own; a move between pieces of the static
+        world does not count, and a proposal that moves too slowly to leave it is
+        reported with it; 0: none, as Algorithm 1).
     skip_steps : tuple of str, default=()
         Steps of :data:`ROBUST_STEPS` to leave out (ablations).
     sweep : bool, default=False
@@ -229,6 +234,7 @@ def robust_multi_model_em(
     join_pieces = sweep and run["moving_pieces"] and motion_tolerance > 0
     max_outlier_weight = _MAX_OUTLIER_WEIGHT if sweep else 1.0
     labels, n_clusters = _compact_initial(init_labels)
+    report_before = labels
     log_volume_density = log_uniform_density(a, b)
     order = morton_order(np.ascontiguousarray(a.T))
     if not reads_neighbours(skip_steps):
@@ -337,7 +343,7 @@ def robust_multi_model_em(
             # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
             counts = np.bincount(members[members >= 0], minlength=n_clusters)
             own, kept = drop_small_clusters(members, counts, min_cluster_size)
-            static_root, static = static, _position(kept, static)
+            static = _position(kept, static)
             models = models.take(kept)
             weights = _weights(counts[kept], n)
             # 7. E-step and classification of eq. (7), gated by tau but for the static world.
@@ -428,22 +434,23 @@ def robust_multi_model_em(
             # A change of the clusters reported, not of their numbers (compacting
             # renumbers them) nor inside the static world (slow pieces are reported
             # with it, and a network's flow moves points between them for ever).
-            reported = np.arange(n_clusters + 1)
-            reported[-1] = -1
-            if static_root >= 0:
-                reported[slow] = static_root
-            before = reported[np.where(labels >= 0, root[np.maximum(labels, 0)], -1)]
-            origin = np.append(kept, -1)[new]  # -1 for outliers and proposals
-            after = reported[origin]
-            after[(new >= 0) & (origin < 0)] = -2  # a proposal's
-            n_changed = int(np.count_nonzero(before != after))
+            report = _reported(new, kept, static, slow)
+            if static >= 0 and found:
+                # A slow proposal will be reported with the static world, as a slow
+                # cluster; reported apart now, it would count as moved twice.
+                slowly = moves_slowly(a, b, found, reference, sigma_floor, min_motion, noise_scale)
+                if slowly.any():
+                    report = report.copy()
+                    report[np.concatenate(list(compress(found, slowly)))] = static
+            n_changed = rows_moved(report_before, report)
+            report_before = report
             new, n_clusters = _compact_initial(new)
             step["changed"] = n_changed
             if verbose:
                 print(", ".join(f"{key} {value:g}" for key, value in step.items()))
             labels = new
-            # Proposals and joined pieces count by the correspondences they move.
-            if n_changed <= tol * n and not (n_merges or n_static):
+            # Merges, proposals and joined pieces count by the correspondences they move.
+            if n_changed <= tol * n:
                 converged = True
                 break
     # Final clean-up: one more merge, the static world gathered, no boundary layer and
@@ -601,6 +608,15 @@ def _unexplained(a, b, labels, static, models, noise_scale, confidence):
     limit = chi2.ppf(confidence, a.shape[1]) * models.sigmas[static] ** 2
     unexplained[rows[sq > limit]] = True
     return unexplained
+
+
+def _reported(labels, kept, static, slow):
+    """``labels`` (positions in ``kept``) with the slow clusters reported as the static
+    world, which they belong to."""
+    if static < 0 or not len(slow):
+        return labels
+    origin = np.append(kept, -1)[labels]
+    return np.where((labels >= 0) & np.isin(origin, slow), static, labels)
 
 
 def _position(kept, cluster):

@@ -44,6 +44,7 @@ __all__ = [
     "merge_adjacent",
     "merge_static_world",
     "motion_gap",
+    "moves_slowly",
     "pool_sigmas",
     "propose_clusters",
     "range_noise_scale",
@@ -659,6 +660,25 @@ def motion_beyond_scatter(models, reference, clusters):
     clusters = np.asarray(clusters, dtype=np.intp)
     scatter = _rms(models.squared_error[clusters], models.moments.take(clusters))
     return motion_gap(models, reference, clusters) - scatter
+
+
+def moves_slowly(a, b, groups, reference, sigma_floor, min_motion, noise_scale=None):
+    """Which groups of correspondences move less than ``min_motion`` beyond their own
+    scatter (:func:`motion_beyond_scatter`) relative to the ``reference`` motion ``(R,
+    t)``: fitted as clusters, :func:`merge_static_world` would call them slow."""
+    if not len(groups):
+        return np.zeros(0, dtype=bool)
+    rows = np.concatenate(groups)
+    labels = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
+    scale = None if noise_scale is None else noise_scale[rows]
+    models = fit_clusters(a[rows], b[rows], labels, len(groups), sigma_floor, scale)
+    k, d = models.translations.shape
+    rotation, translation = reference
+    excess = models.moments.squared_error(
+        np.broadcast_to(rotation, (k, d, d)), np.broadcast_to(translation, (k, d))
+    )
+    gap = _rms(excess - models.squared_error, models.moments)
+    return gap - _rms(models.squared_error, models.moments) < min_motion
 
 
 def motion_size(models, clusters, static):
