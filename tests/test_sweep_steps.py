@@ -10,6 +10,7 @@ from mmreg import MultiModelRegistration
 from mmreg._neighbors import NeighbourTable
 from mmreg.datasets import make_street
 from mmreg.estimators import _robust_steps as robust_steps
+from mmreg.estimators._robust_em import robust_multi_model_em
 from mmreg.estimators._robust_steps import (
     estimate_range_growth,
     fit_clusters,
@@ -160,3 +161,24 @@ def test_wrong_flows_that_agree_by_chance_are_no_cluster():
         assert wrong[est.labels_ == j].mean() < 0.5, f"cluster {j} is mostly wrong flows"
     # One cluster per motion that holds at least min_cluster_size right flows.
     assert est.n_clusters_ == np.count_nonzero(np.bincount(scene.labels[~wrong]) >= 4)
+
+
+def test_a_slow_piece_among_the_static_worlds_points_is_not_dissolved():
+    # Every third point of one corner of the static world moves 2 cm more (min_motion
+    # 5 cm): a slow piece, reported with the static world and lying among its points,
+    # whose members are all strays. Dissolved, its rows became outliers and 19 stayed so.
+    rng = np.random.default_rng(0)
+    grid = np.stack(np.meshgrid(np.arange(0, 20, 0.25), np.arange(0, 20, 0.25)), -1)
+    grid = grid.reshape(-1, 2)
+    world = np.c_[grid + rng.uniform(-0.05, 0.05, grid.shape), rng.uniform(0, 0.02, len(grid))]
+    car = rng.uniform([30, 0, 0], [34, 2, 1.5], size=(400, 3))
+    a = np.vstack([world, car])
+    b = a + np.r_[rng.normal(scale=0.005, size=(len(world), 3)), np.tile([1.0, 0, 0], (400, 1))]
+    corner = np.flatnonzero((world[:, 0] < 8) & (world[:, 1] < 8))[::3]
+    b[corner] += [0.02, 0, 0]
+    init = np.r_[np.zeros(len(world), int), np.ones(400, int)]
+    init[corner] = 2
+    result = robust_multi_model_em(a, b, init, tau=5.0, sweep=True, random_state=0)
+    assert [step["bled"] for step in result.history] == [0] * result.n_iter
+    assert np.all(result.labels[: len(world)] == result.static_cluster)
+    assert np.all(result.labels[len(world) :] == 1 - result.static_cluster)

@@ -12,7 +12,8 @@ correspondence to its most likely cluster within the gate); the named steps of
    admits everywhere;
 4. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
    in the sweep variant, clusters whose members lie scattered among other clusters'
-   points (:func:`scattered_clusters`): neither has a body of its own;
+   points (:func:`scattered_clusters`): neither has a body of its own (the static
+   world and its slow pieces, which lie among its points, are never dissolved);
 5. removal of small clusters (Algorithm 1, lines 10-13);
 6. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
    correspondence's noise scale ``sigma_j g_i`` growing with its range when the data say
@@ -264,20 +265,22 @@ def robust_multi_model_em(
     # for a static world yet.
     own_scales = sweep
 
-    def layers_of(labels, n_clusters):
+    def layers_of(labels, n_clusters, world):
+        # The static world's clusters (it and its slow pieces, which are reported with
+        # it and lie among its points) are never layers.
         layers = boundary_layers(
             a,
             labels,
             n_clusters,
             spacing,
-            exempt=static,
+            exempt=world,
             neighbours=neighbours,
             ignore_strays=sweep,
         )
         if not sweep:
             return layers
         # With a noise scale of their own, a few scattered wrong flows can hold a motion.
-        scattered = scattered_clusters(labels, n_clusters, neighbours, exempt=static)
+        scattered = scattered_clusters(labels, n_clusters, neighbours, exempt=world)
         return np.union1d(layers, scattered)
 
     def fit(labels, n_clusters):
@@ -338,7 +341,7 @@ def robust_multi_model_em(
             # 5. Dissolve layers of flow that bled along another cluster's boundary.
             bled = []
             if run["boundary_layers"]:
-                bled = layers_of(members, n_clusters)
+                bled = layers_of(members, n_clusters, np.append(slow, static))
                 members[np.isin(members, bled)] = -1
             # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
             counts = np.bincount(members[members >= 0], minlength=n_clusters)
@@ -412,7 +415,8 @@ def robust_multi_model_em(
                 kept = np.append(kept, -1)
             if run["boundary_layers"] and found:
                 # A proposal along another cluster's boundary is bled flow too.
-                layers = layers_of(new, len(kept))
+                world = np.append(np.flatnonzero(np.isin(kept, slow)), static)
+                layers = layers_of(new, len(kept), world)
                 first_new = len(models.sigmas)
                 found = [f for k, f in enumerate(found) if first_new + k not in layers]
                 new[np.isin(new, layers[layers >= first_new])] = -1
@@ -482,7 +486,7 @@ def robust_multi_model_em(
             )
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
         if run["boundary_layers"]:
-            bled = layers_of(labels, n_clusters)
+            bled = layers_of(labels, n_clusters, [static])
             labels = np.where(np.isin(labels, bled), -1, labels)
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
     labels, kept = drop_small_clusters(labels, counts, min_cluster_size)

@@ -907,8 +907,9 @@ def boundary_layers(
     spacing : ndarray of shape (n,)
         Distance from each point to its nearest neighbour among all points.
     thickness : float, default=3.0
-    exempt : int, default=-1
-        A cluster that is never a layer (the static world); its points are not queried.
+    exempt : int or array-like of int, default=-1
+        Clusters that are never layers (the static world); their points are not
+        queried. Negative values name none.
     neighbours : NeighbourTable, default=None
         The nearest neighbours of ``points``; built here if None. A loop that calls this
         every iteration builds it once.
@@ -944,8 +945,7 @@ def boundary_layers(
     # many of its points have a foreign point within the limit.
     needed = (counts - 1) // 2 + 1
     candidate = counts > 0
-    if exempt >= 0:
-        candidate[exempt] = False
+    candidate[_clusters_named(exempt)] = False
     counted = labels.copy()
     if ignore_strays:
         alone = np.zeros(len(labels), dtype=bool)
@@ -992,14 +992,18 @@ def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
     around it, its members have many of their own among their neighbours.
     Correspondences that only share a motion while scattered among other points are
     not: a few of a blob of wrong flows that agree within a noise that grows with range,
-    spread over metres of the static world. Not applied to ``exempt`` (the static world).
+    spread over metres of the static world. Not applied to the ``exempt`` clusters (the
+    static world; an int or array-like, negative values naming none).
 
     Returns
     -------
     clusters : ndarray
         Indices of the clusters more than half of whose members are strays.
     """
-    rows = np.flatnonzero((labels >= 0) & (labels != exempt))
+    judged = np.ones(n_clusters + 1, dtype=bool)
+    judged[-1] = False  # label -1
+    judged[_clusters_named(exempt)] = False
+    rows = np.flatnonzero(judged[labels])
     if not len(rows):
         return np.empty(0, dtype=np.intp)
     own = labels[rows]
@@ -1016,6 +1020,12 @@ def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
         stray[start + looked] = 4 * mine[looked, reach - 1] < reach
     n_strays = np.bincount(own[stray], minlength=n_clusters)
     return np.flatnonzero(2 * n_strays > size)
+
+
+def _clusters_named(clusters):
+    """The non-negative entries of an int or array-like of cluster indices."""
+    clusters = np.atleast_1d(np.asarray(clusters, dtype=np.intp))
+    return clusters[clusters >= 0]
 
 
 def drop_small_clusters(labels, counts, min_cluster_size):
