@@ -126,6 +126,18 @@ def test_two_raw_sweeps():
     assert est.moving_.sum() == 2
 
 
+def test_raw_default_estimator_starts_from_the_islands_and_a_given_one_as_given():
+    a, b, labels, rotations, translations, sweep = make_pair()
+    raw = SweepRegistration(max_distance=1.5, island_radius=1.0, min_island_size=20)
+    raw = raw.set_params(random_state=0).fit(a, sweep=sweep)
+    init = raw.estimator_.get_params()["init"]
+    assert isinstance(init, np.ndarray) and init.shape == (len(a),)
+    assert raw.estimator is None  # the parameter itself is left alone
+    assert _motion_error(raw, a, labels, rotations, translations) < EXACT
+    given = _estimator(island_radius=1.0, min_island_size=20).fit(a, sweep=sweep)
+    assert given.estimator_.get_params()["init"] == "euclidean"
+
+
 @pytest.mark.parametrize(
     ("sweep", "message"),
     [
