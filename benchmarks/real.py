@@ -26,7 +26,9 @@ Methods, each with its defaults and tau = 5 m (the paper's street and FlyingThin
 setting) where it takes a tau: ``mmreg`` (``MultiModelRegistration()``, whose default is
 ``variant="sweep"``), ``sweep`` and ``robust`` (those variants: ``robust`` is the earlier
 default, one noise scale shared by all clusters), ``paper``
-(``variant="paper"``) and the baselines of :mod:`mmreg.methods` (``naive``,
+(``variant="paper"``), ``voxel`` (the default fitted on one correspondence per 0.3 m
+voxel, ``voxel_size=0.3``; ``voxel0.2`` another side) and the baselines of
+:mod:`mmreg.methods` (``naive``,
 ``sequential_ransac``, ``t_linkage``); any name of ``available_methods()`` works. The
 initialisation is each method's default (Euclidean clustering, 100 clusters). A baseline
 whose fit takes longer than ``--max-seconds`` is skipped on the remaining scenes.
@@ -105,6 +107,9 @@ NOISE_STD = 0.02  # metres per axis
 NOISE_SCALE = 0.9  # moving objects' flow is scaled by this in the noisy variant
 
 DEFAULT_METHODS = ("mmreg", "robust", "paper", "naive", "sequential_ransac", "t_linkage")
+# The side of the voxels of the ``voxel`` method (the default fitted on one
+# correspondence per voxel), in metres.
+VOXEL_SIZE = 0.3
 BASELINES = ("naive", "sequential_ransac", "t_linkage")
 
 # The inputs made from each scene; scenes not listed give their ground-truth flow only.
@@ -293,6 +298,17 @@ def _base_and_step(name):
     return None
 
 
+def _voxel_size(name):
+    """The voxel side of ``"voxel"`` (0.3) or ``"voxel<size>"`` (e.g. ``"voxel0.2"``),
+    None for any other name."""
+    if not name.startswith("voxel"):
+        return None
+    try:
+        return float(name.removeprefix("voxel") or VOXEL_SIZE)
+    except ValueError:
+        return None
+
+
 def build_method(name, seed):
     """A new estimator of the benchmark's method ``name``."""
     from mmreg import MultiModelRegistration
@@ -304,13 +320,16 @@ def build_method(name, seed):
         return MultiModelRegistration(tau=TAU, random_state=seed, **skip)
     if base in ("sweep", "robust", "paper"):
         return MultiModelRegistration(variant=base, tau=TAU, random_state=seed, **skip)
+    size = _voxel_size(base)
+    if size is not None:
+        return MultiModelRegistration(tau=TAU, voxel_size=size, random_state=seed, **skip)
     return make_method(name, tau=TAU, random_state=seed, strict=False)
 
 
 def check_methods(names):
     extra = {"paper"} | ({"sweep", "robust"} & estimator_variants())
     known = set(available_methods()) | extra
-    unknown = [m for m in names if m not in known]
+    unknown = [m for m in names if m not in known and _voxel_size(m) is None]
     if unknown:
         raise SystemExit(
             f"real.py: error: unknown method(s) {', '.join(unknown)}; available: "
@@ -332,7 +351,9 @@ class SharedInit:
         self.labels, self.seconds = None, 0.0
 
     def give(self, est):
-        if est.get_params(deep=False).get("init") != "euclidean":
+        params = est.get_params(deep=False)
+        # A voxel fit clusters its own sample, not every row.
+        if params.get("init") != "euclidean" or params.get("voxel_size") is not None:
             return 0.0
         if self.labels is None:
             start = time.perf_counter()

@@ -61,7 +61,15 @@ from mmreg.estimators._robust_steps import (
     trimmed_fit,
 )
 
-__all__ = ["ROBUST_STEPS", "RobustEMResult", "reads_neighbours", "robust_multi_model_em"]
+__all__ = [
+    "ROBUST_STEPS",
+    "Pieces",
+    "RobustEMResult",
+    "assign_to_pieces",
+    "reads_neighbours",
+    "refit_clusters",
+    "robust_multi_model_em",
+]
 
 #: The steps around Algorithm 1 that ``skip_steps`` may turn off.
 ROBUST_STEPS = (
@@ -99,6 +107,31 @@ class RobustEMResult(EMResult):
     """The static world's cluster, -1 if no motion holds the majority."""
     moving: np.ndarray = None
     """Per cluster: does it move relative to the static world?"""
+    pieces: "Pieces" = None
+    """The clusters of the final clean-up before they were joined into the ones
+    reported (None without an iteration): what :func:`assign_to_pieces` judges
+    further correspondences by."""
+
+
+@dataclass
+class Pieces:
+    """The final clean-up's clusters, each with its own motion, and what each became.
+
+    The static world's slow pieces keep a motion of their own here (a parked car whose
+    flow carries a centimetre of jitter): judged by the static world's motion alone,
+    their correspondences would look wrong.
+    """
+
+    points: np.ndarray
+    """The a-points of the correspondences fitted."""
+    labels: np.ndarray
+    """Piece of each correspondence fitted (-1 for none)."""
+    models: object
+    """:class:`ClusterModels` of the pieces."""
+    reported: np.ndarray
+    """The reported cluster each piece became (-1: dissolved or dropped)."""
+    static: int
+    """The static world's piece (admitted everywhere by the gate), -1 if none."""
 
 
 def _range_noise(a, b, labels, models, sigma_floor, robust):
@@ -460,6 +493,7 @@ def robust_multi_model_em(
     # Final clean-up: one more merge, the static world gathered, no boundary layer and
     # no cluster below m_min; numbered by size. With max_iter=0 the initial clusters are
     # returned as given (the paper's contract).
+    pieces = None
     if n_iter and n_clusters:
         inliers, models = fit(labels, n_clusters)
         root = np.arange(n_clusters)
@@ -469,9 +503,17 @@ def robust_multi_model_em(
         static, models, root, _, slow = _gather_static_world(
             models, root, d, sigma_floor, share, min_motion
         )
+        pieces = Pieces(
+            a,
+            np.where(labels >= 0, root[np.maximum(labels, 0)], -1),
+            models.take(np.arange(n_clusters)),
+            None,
+            static,
+        )
         # Slow clusters are reported as the static world they belong to.
         root[np.isin(root, slow)] = static
         labels = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
+        became = root.copy()  # what each piece became, through the steps below
         if join_pieces:
             joined, models, _ = join_moving_pieces(
                 a,
@@ -485,15 +527,19 @@ def robust_multi_model_em(
                 workers=workers,
             )
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
+            became = joined[became]
         if run["boundary_layers"]:
             bled = layers_of(labels, n_clusters, [static])
             labels = np.where(np.isin(labels, bled), -1, labels)
+            became[np.isin(became, bled)] = -1
     counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
     labels, kept = drop_small_clusters(labels, counts, min_cluster_size)
     static = _position(kept, static) if n_iter else -1
-    n_clusters = len(kept)
-    rank = _size_rank(labels, n_clusters)
+    rank = _size_rank(labels, len(kept))
     labels = rank[labels]
+    if pieces is not None:
+        pieces.reported = rank[drop_small_clusters(became, counts, min_cluster_size)[0]]
+    n_clusters = len(kept)
     static = int(rank[static]) if static >= 0 else -1
     _, models = fit(labels, n_clusters)
     if sweep and n_iter and n_clusters and run["outliers"]:
@@ -509,10 +555,7 @@ def robust_multi_model_em(
             log_volume_density,
             workers,
         )
-    moving = np.ones(n_clusters, dtype=bool)
-    if static >= 0:
-        moving = motion_beyond_scatter(models, static, np.arange(n_clusters)) >= min_motion
-        moving[static] = False
+    moving = _moving(models, static, min_motion)
     weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), n)
     return RobustEMResult(
         labels,
@@ -527,7 +570,103 @@ def robust_multi_model_em(
         float(growth) if noise_scale is not None else 0.0,
         static,
         moving,
+        pieces,
     )
+
+
+def assign_to_pieces(
+    a, b, pieces, *, tau, log_outlier, noise_scale=None, false_alarms=None, workers=1
+):
+    """Correspondences that the loop did not fit, judged by the final clean-up's pieces.
+
+    Each goes to its most likely piece among those whose fitted a-points lie within
+    ``tau`` (the static world's everywhere), or -1 where the outlier component
+    (``log_outlier``, :func:`reject_outliers`) explains it better, and is reported as
+    the cluster its piece became.
+
+    Returns
+    -------
+    labels : ndarray of shape (len(a),)
+    """
+    if pieces is None or not len(a):
+        return np.full(len(a), -1, dtype=np.intp)
+    n_pieces = len(pieces.models.sigmas)
+    fitted = pieces.labels
+    gate = ClusterGate(
+        pieces.points,
+        fitted,
+        n_pieces,
+        tau,
+        ungated=[pieces.static] if pieces.static >= 0 else [],
+        workers=workers,
+    )
+    judged = judge_correspondences(
+        a,
+        b,
+        pieces.models.rotations,
+        pieces.models.translations,
+        pieces.models.sigmas,
+        _weights(np.bincount(fitted[fitted >= 0], minlength=n_pieces), len(fitted)),
+        gate,
+        log_outlier,
+        noise_scale,
+        false_alarms=false_alarms,
+    )
+    return np.where(judged >= 0, np.append(pieces.reported, -1)[judged], -1)
+
+
+def refit_clusters(
+    a,
+    b,
+    labels,
+    n_clusters,
+    static,
+    reference,
+    *,
+    sigma_floor=None,
+    noise_scale=None,
+    confidence=0.999,
+    sweep=True,
+    min_motion=0.05,
+):
+    """The trimmed M-step of the final clusters on correspondences labelled after the
+    loop (:func:`assign_to_pieces`), and which of the clusters move.
+
+    ``reference``: the static world's motion ``(R, t)`` (None without one), which bounds
+    a moving cluster's noise scale as in the loop.
+
+    Returns
+    -------
+    models : ClusterModels
+    moving : ndarray of bool of shape (n_clusters,)
+    """
+    if sigma_floor is None:
+        sigma_floor = default_sigma_floor(b)
+    own_scales = sweep and static >= 0
+    _, models = trimmed_fit(
+        a,
+        b,
+        labels,
+        n_clusters,
+        sigma_floor,
+        noise_scale,
+        confidence=confidence,
+        per_cluster=own_scales,
+        max_noise_ratio=_MAX_NOISE_RATIO if sweep else None,
+        reference=reference if own_scales else None,
+    )
+    return models, _moving(models, static, min_motion)
+
+
+def _moving(models, static, min_motion):
+    """Per cluster: does it move relative to the static world, beyond its own scatter
+    (all of them when there is no static world)?"""
+    n_clusters = len(models.sigmas)
+    moving = np.ones(n_clusters, dtype=bool)
+    if static >= 0:
+        moving = motion_beyond_scatter(models, static, np.arange(n_clusters)) >= min_motion
+        moving[static] = False
+    return moving
 
 
 def _readmit_outliers(

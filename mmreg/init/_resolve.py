@@ -7,7 +7,7 @@ from sklearn.utils._param_validation import HasMethods, StrOptions
 from mmreg._validation import check_labels
 from mmreg.init._base import BaseInitializer
 
-__all__ = ["INIT_CONSTRAINT", "INIT_SHORTCUTS", "initial_labels"]
+__all__ = ["INIT_CONSTRAINT", "INIT_SHORTCUTS", "initial_labels", "is_label_array"]
 
 
 def _shortcuts(tau=None):
@@ -24,6 +24,13 @@ INIT_SHORTCUTS = ("euclidean", "dbscan")
 
 # The `_parameter_constraints` entry of every estimator that takes an `init`.
 INIT_CONSTRAINT = [StrOptions(set(INIT_SHORTCUTS)), HasMethods(["fit_predict"]), "array-like"]
+
+
+def is_label_array(init):
+    """Whether ``init`` gives precomputed labels (not a shortcut nor a clusterer)."""
+    if isinstance(init, str) or hasattr(init, "fit_predict"):
+        return False
+    return isinstance(init, (list, tuple, np.ndarray)) or hasattr(init, "__array__")
 
 
 def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None, neighbours=None):
@@ -91,7 +98,7 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None, neighbo
             clusterer.set_params(**inherited)
         data = X if isinstance(clusterer, BaseInitializer) else X[:, : n_columns // 2]
         return check_labels(clusterer.fit_predict(data), n, name="labels from init")
-    if isinstance(init, (list, tuple, np.ndarray)) or hasattr(init, "__array__"):
+    if is_label_array(init):
         return check_labels(init, n, name="init labels")
     raise TypeError(
         "init must be a shortcut string, a clusterer with fit_predict, or an array of "
