@@ -35,5 +35,11 @@ def voxel_representatives(points, size):
     if not len(points):
         return np.zeros(0, dtype=np.intp)
     cells = np.floor((points - points.min(axis=0)) / size).astype(np.int64)
-    _, first = np.unique(cells, axis=0, return_index=True)
+    extent = cells.max(axis=0) + 1
+    if np.sum(np.log2(extent.astype(float))) < 62:
+        # One integer per voxel (mixed radix): a sort of n integers, not of n rows.
+        strides = np.cumprod(np.r_[1, extent[:-1]])
+        _, first = np.unique(cells @ strides, return_index=True)
+    else:  # pragma: no cover - a grid of more than 2^62 voxels
+        _, first = np.unique(cells, axis=0, return_index=True)
     return np.sort(first)

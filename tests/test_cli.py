@@ -148,6 +148,17 @@ def test_register_csv_with_labels_init_in_process(files, scene, tmp_path, capsys
     np.testing.assert_array_equal(mmio.read_labels(out / "labels.npy"), scene.labels)
 
 
+def test_register_on_a_voxel_sample(files, scene, tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["register", str(files / "pairs.npy"), "--voxel-size", "0.2", "--out", str(out)])
+    assert code == 0
+    _check_result(out, scene, 3)
+    run = json.loads((out / "run.json").read_text())
+    assert run["estimator"]["voxel_size"] == 0.2
+    assert main(["register", str(files / "pairs.npy"), "--voxel-size", "0.2", "--paper"]) == 2
+    assert "drop --paper" in capsys.readouterr().err
+
+
 def test_register_default_out_is_named_after_the_input(files, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["register", str(files / "pairs.npy"), "-q"]) == 0
