@@ -535,8 +535,9 @@ class MultiModelRegistration(BaseRegistration):
         weights = result.weights
         if rows is not None:
             a, b = all_a, all_b
-            labels = self._judge_the_rest(a, b, rows, result, workers)
-            rotations, translations, sigmas = self._refit_on_all(a, b, labels, result)
+            noise_scale = self._noise_scale(a)
+            labels = self._judge_the_rest(a, b, rows, result, noise_scale, workers)
+            rotations, translations, sigmas = self._refit_on_all(a, b, labels, result, noise_scale)
             weights = np.bincount(labels[labels >= 0], minlength=len(sigmas)) / n
             self.init_labels_ = np.full(n, -1, dtype=np.intp)
             self.init_labels_[rows] = initial
@@ -565,34 +566,32 @@ class MultiModelRegistration(BaseRegistration):
         rows = voxel_representatives(a, self.voxel_size)
         return None if len(rows) == len(a) else rows
 
-    def _judge_the_rest(self, a, b, rows, result, workers):
+    def _judge_the_rest(self, a, b, rows, result, noise_scale, workers):
         """Labels of every correspondence, those left out of the fit judged by its
-        pieces (:func:`assign_to_pieces`), and the clusters' weights among them all."""
+        pieces (:func:`assign_to_pieces`)."""
         n = len(a)
         labels = np.full(n, -1, dtype=np.intp)
         labels[rows] = result.labels
         rest = np.ones(n, dtype=bool)
         rest[rows] = False
         rest = np.flatnonzero(rest)
-        growth = result.noise_growth
         labels[rest] = assign_to_pieces(
             a[rest],
             b[rest],
             result.pieces,
             tau=self.tau,
             log_outlier=result.log_outlier_density,
-            noise_scale=range_noise_scale(a[rest], growth) if growth > 0 else None,
+            noise_scale=None if noise_scale is None else noise_scale[rest],
             false_alarms=_FALSE_ALARMS * len(rest) / n if self.variant == "sweep" else None,
             workers=workers,
         )
         return labels
 
-    def _refit_on_all(self, a, b, labels, result):
+    def _refit_on_all(self, a, b, labels, result, noise_scale):
         """The clusters' motions and noise scales refitted on all their members, and
         which of them move (``moving_``)."""
         static = result.static_cluster
         reference = (result.rotations[static], result.translations[static]) if static >= 0 else None
-        growth = result.noise_growth
         models, self.moving_ = refit_clusters(
             a,
             b,
@@ -601,7 +600,7 @@ class MultiModelRegistration(BaseRegistration):
             static,
             reference,
             sigma_floor=self.sigma_floor,
-            noise_scale=range_noise_scale(a, growth) if growth > 0 else None,
+            noise_scale=noise_scale,
             confidence=self.confidence if "trimming" not in self.skip_steps else 1.0,
             sweep=self.variant == "sweep",
             min_motion=self.min_motion,

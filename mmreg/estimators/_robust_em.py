@@ -446,10 +446,11 @@ def robust_multi_model_em(
             for group in found:
                 new[group] = len(kept)
                 kept = np.append(kept, -1)
+            # The slow clusters' positions among the kept ones (proposals are not).
+            slow_kept = np.flatnonzero(np.isin(kept, slow))
             if run["boundary_layers"] and found:
                 # A proposal along another cluster's boundary is bled flow too.
-                world = np.append(np.flatnonzero(np.isin(kept, slow)), static)
-                layers = layers_of(new, len(kept), world)
+                layers = layers_of(new, len(kept), np.append(slow_kept, static))
                 first_new = len(models.sigmas)
                 found = [f for k, f in enumerate(found) if first_new + k not in layers]
                 new[np.isin(new, layers[layers >= first_new])] = -1
@@ -471,7 +472,8 @@ def robust_multi_model_em(
             # A change of the clusters reported, not of their numbers (compacting
             # renumbers them) nor inside the static world (slow pieces are reported
             # with it, and a network's flow moves points between them for ever).
-            report = _reported(new, kept, static, slow)
+            # Slow clusters are reported with the static world they belong to.
+            report = np.where(np.isin(new, slow_kept), static, new) if static >= 0 else new
             if static >= 0 and found:
                 # A slow proposal will be reported with the static world, as a slow
                 # cluster; reported apart now, it would count as moved twice.
@@ -751,15 +753,6 @@ def _unexplained(a, b, labels, static, models, noise_scale, confidence):
     limit = chi2.ppf(confidence, a.shape[1]) * models.sigmas[static] ** 2
     unexplained[rows[sq > limit]] = True
     return unexplained
-
-
-def _reported(labels, kept, static, slow):
-    """``labels`` (positions in ``kept``) with the slow clusters reported as the static
-    world, which they belong to."""
-    if static < 0 or not len(slow):
-        return labels
-    origin = np.append(kept, -1)[labels]
-    return np.where((labels >= 0) & np.isin(origin, slow), static, labels)
 
 
 def _position(kept, cluster):

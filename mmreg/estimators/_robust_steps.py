@@ -672,13 +672,8 @@ def moves_slowly(a, b, groups, reference, sigma_floor, min_motion, noise_scale=N
     labels = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
     scale = None if noise_scale is None else noise_scale[rows]
     models = fit_clusters(a[rows], b[rows], labels, len(groups), sigma_floor, scale)
-    k, d = models.translations.shape
-    rotation, translation = reference
-    excess = models.moments.squared_error(
-        np.broadcast_to(rotation, (k, d, d)), np.broadcast_to(translation, (k, d))
-    )
-    gap = _rms(excess - models.squared_error, models.moments)
-    return gap - _rms(models.squared_error, models.moments) < min_motion
+    scatter = _rms(models.squared_error, models.moments)
+    return _motion_from(models, reference) - scatter < min_motion
 
 
 def motion_size(models, clusters, static):
