@@ -2,7 +2,7 @@
 
 import numpy as np
 
-__all__ = ["voxel_representatives"]
+__all__ = ["occupied_voxels", "voxel_representatives", "voxel_side_for"]
 
 
 def voxel_representatives(points, size):
@@ -43,3 +43,71 @@ def voxel_representatives(points, size):
     else:  # pragma: no cover - a grid of more than 2^62 voxels
         _, first = np.unique(cells, axis=0, return_index=True)
     return np.sort(first)
+
+
+def occupied_voxels(points, size):
+    """How many cubic voxels of side ``size`` hold at least one of ``points``."""
+    return len(voxel_representatives(points, size))
+
+
+def voxel_side_for(points, n_voxels, *, slack=0.15, max_steps=12):
+    """A voxel side whose grid holds between ``(1 - slack) n_voxels`` and ``n_voxels``
+    occupied voxels, None if the points occupy fewer voxels than that at any side.
+
+    The count falls with the side as a power law (about ``side^-2`` on surfaces), so the
+    search steps along the secant of ``log count`` against ``log side``, bisecting when
+    a step would leave the bracket found so far. It is a function of the points alone.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    n_voxels : int
+        The most occupied voxels wanted.
+    slack : float, default=0.15
+    max_steps : int, default=12
+        Counts tried; then the largest count below ``n_voxels`` found wins.
+
+    Returns
+    -------
+    side : float or None
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._voxels import occupied_voxels, voxel_side_for
+    >>> points = np.random.default_rng(0).uniform(size=(20_000, 3))
+    >>> side = voxel_side_for(points, 1_000)
+    >>> 850 <= occupied_voxels(points, side) <= 1_000
+    True
+    """
+    points = np.asarray(points, dtype=float)
+    extent = float(np.max(np.ptp(points, axis=0))) if len(points) else 0.0
+    if len(points) <= n_voxels or extent == 0:
+        return None
+    low = n_voxels * (1 - slack)
+    side = extent / n_voxels ** (1 / points.shape[1])
+    small, large = None, None  # (side, count): above the target, at most the target
+    for _ in range(max_steps):
+        count = occupied_voxels(points, side)
+        if count > n_voxels:
+            small = (side, count)
+        else:
+            large = (side, count) if large is None or count > large[1] else large
+            if count >= low:
+                return side
+        side = _next_side(small, large, (side, count), np.sqrt(low * n_voxels))
+    return None if large is None else large[0]
+
+
+def _next_side(small, large, last, target):
+    """The side that the secant of the bracket's ends (or a slope of -2 from the last
+    count) gives ``target`` voxels, kept strictly inside the bracket."""
+    if small is not None and large is not None:
+        (s0, c0), (s1, c1) = small, large
+        slope = np.log(c1 / c0) / np.log(s1 / s0) if c1 != c0 else -2.0
+        side = s0 * np.exp(np.log(target / c0) / min(slope, -0.5))
+        if not s0 < side < s1:
+            side = np.sqrt(s0 * s1)
+        return side
+    side, count = last
+    return side * (max(count, 1) / target) ** 0.5

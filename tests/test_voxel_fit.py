@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mmreg import MultiModelRegistration
-from mmreg._voxels import voxel_representatives
+from mmreg._voxels import voxel_representatives, voxel_side_for
 from mmreg.datasets import make_scene
 from mmreg.metrics import iou_score
 
@@ -87,3 +87,72 @@ def test_precomputed_init_labels_are_sampled_with_the_rows():
     assert iou_score(scene.labels, est.labels_) == 1.0
     with pytest.raises(ValueError, match="init labels"):
         MultiModelRegistration(init=scene.labels[:-1], voxel_size=0.1).fit(scene.X)
+
+
+def _world_with_a_small_dense_object(rng, n_object=150):
+    grid = np.stack(np.meshgrid(np.arange(0, 20, 0.1), np.arange(0, 20, 0.1)), -1)
+    grid = grid.reshape(-1, 2)
+    world = np.c_[grid + rng.uniform(-0.02, 0.02, grid.shape), rng.uniform(0, 0.02, len(grid))]
+    # Dense and small: at most 8 voxels of 0.3 m hold all of it, 3 m from the world's edge.
+    thing = rng.uniform([23.0, 10.0, 0.0], [23.25, 10.25, 0.25], size=(n_object, 3))
+    a = np.vstack([world, thing])
+    b = a + rng.normal(scale=0.002, size=a.shape)
+    b[len(world) :] += [0.5, 0.2, 0.0]
+    return np.hstack([a, b]), len(world)
+
+
+def test_a_small_object_that_the_sample_sees_as_a_handful_is_found():
+    X, n_world = _world_with_a_small_dense_object(np.random.default_rng(1))
+    est = MultiModelRegistration(tau=5.0, voxel_size=0.3, random_state=0).fit(X)
+    sampled = est.init_labels_[n_world:] >= 0
+    assert sampled.sum() <= 8  # of its 150 rows
+    thing = est.labels_[n_world:]
+    assert thing[0] >= 0 and thing[0] != est.static_cluster_
+    assert np.mean(thing == thing[0]) > 0.95
+    assert est.moving_[thing[0]]
+    assert np.all(est.labels_[:n_world] == est.static_cluster_)
+    assert est.n_clusters_ == 2
+    np.testing.assert_allclose(est.flow_[n_world:], np.tile([0.5, 0.2, 0.0], (150, 1)), atol=0.01)
+
+
+def test_new_clusters_among_the_rest_have_a_body_and_a_motion_of_their_own():
+    # Wrong correspondences scattered over the world agree on no motion: the rows the
+    # sample left out add no cluster.
+    rng = np.random.default_rng(2)
+    X, n_world = _world_with_a_small_dense_object(rng)
+    wrong = rng.choice(n_world, size=2000, replace=False)
+    X[wrong, 3:] = X[wrong, :3] + rng.uniform(-1, 1, size=(len(wrong), 3))
+    est = MultiModelRegistration(tau=5.0, voxel_size=0.3, random_state=0).fit(X)
+    assert est.n_clusters_ == 2
+    assert np.mean(est.labels_[wrong] < 0) > 0.95
+
+
+@pytest.mark.parametrize("scale", [0.01, 1.0, 100.0])
+def test_the_automatic_side_holds_the_voxels_asked_for_in_any_units(scale):
+    points = np.random.default_rng(0).uniform(size=(30_000, 3)) * [4, 2, 0.1] * scale
+    side = voxel_side_for(points, 5_000)
+    assert 0.85 * 5_000 <= len(voxel_representatives(points, side)) <= 5_000
+    assert side == pytest.approx(voxel_side_for(points / scale, 5_000) * scale, rel=1e-9)
+    assert voxel_side_for(points[:4_000], 5_000) is None
+
+
+def test_auto_fits_inputs_up_to_fifty_thousand_rows_whole():
+    X = make_scene(random_state=0).X  # 22,395 correspondences
+    auto = MultiModelRegistration(random_state=0).fit(X)
+    whole = MultiModelRegistration(voxel_size=None, random_state=0).fit(X)
+    assert auto.voxel_size_ is None
+    np.testing.assert_array_equal(auto.labels_, whole.labels_)
+
+
+def test_auto_fits_larger_inputs_on_a_voxel_sample():
+    rng = np.random.default_rng(3)
+    X, n_world = _world_with_a_small_dense_object(rng)
+    X = np.vstack([X, X[:n_world] + [0.0, 0.0, 0.05, 0.0, 0.0, 0.05]])  # 80,150 rows
+    est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
+    assert est.voxel_size_ is not None
+    assert 21_250 <= np.count_nonzero(est.init_labels_ >= 0) <= 25_000
+    assert est.n_clusters_ == 2
+    thing = est.labels_[n_world : n_world + 150]
+    assert np.all(thing == thing[0]) and est.moving_[thing[0]]
+    paper = MultiModelRegistration(tau=5.0, variant="paper", max_iter=0).fit(X[:60_000])
+    assert paper.voxel_size_ is None

@@ -92,6 +92,12 @@ def _positive_float(text):
     return value
 
 
+def _voxel_size(text):
+    if text.lower() in ("auto", "none"):
+        return None if text.lower() == "none" else "auto"
+    return _positive_float(text)
+
+
 def _tau(text):
     if text.lower() == "none":
         return None
@@ -192,12 +198,12 @@ def add_arguments(parser):
     parser.add_argument("--max-iter", type=_count, default=10, help="most EM iterations")
     parser.add_argument(
         "--voxel-size",
-        type=_positive_float,
-        default=None,
+        type=_voxel_size,
+        default="auto",
         metavar="V",
-        help="fit on one correspondence per voxel of side V (units of the points; 0.2-0.3 "
-        "for LiDAR sweeps in metres) and judge the others by the fitted clusters: several "
-        "times faster on large sweeps (not with --paper)",
+        help="fit on one correspondence per voxel of side V (units of the points) and "
+        "judge the others by the fitted clusters; 'auto' (default): inputs above 50,000 "
+        "rows on a sample of about 25,000, smaller ones whole; 'none': every row",
     )
     parser.add_argument(
         "--paper",
@@ -354,11 +360,12 @@ def _fit(X, init, args, steps, sweep=None):
 
     voxel_size = getattr(args, "voxel_size", None)
     if X.shape[1] == 6 and voxel_size is None:
+        # Every row fitted: the initial clusters are a step of their own.
         with steps.step("initial clusters"), reading(args.init), reported_warnings():
             labels = initial_labels(init, X, random_state=args.seed)
     else:
         # Two raw sweeps: the correspondences, and so the clusters, come later. A voxel
-        # fit clusters its own sample.
+        # fit ("auto" included) clusters its own sample.
         labels = init
     estimator = MultiModelRegistration(
         tau=args.tau,
@@ -499,7 +506,7 @@ def run(args):
     if args.out is None:
         args.out = default_out(args)
     check_out(args.out, overwrite=args.overwrite)  # before any work
-    if args.paper and getattr(args, "voxel_size", None) is not None:
+    if args.paper and getattr(args, "voxel_size", None) not in (None, "auto"):
         raise CLIError("--voxel-size samples the default variant's fit; drop --paper")
     with Steps(5, quiet=args.quiet, verbose=args.verbose) as steps:
         with steps.step(f"reading {args.input}"):

@@ -14,12 +14,13 @@ from sklearn.utils.validation import check_is_fitted
 from mmreg._gate import ClusterGate
 from mmreg._neighbors import NeighbourTable
 from mmreg._validation import check_labels
-from mmreg._voxels import voxel_representatives
+from mmreg._voxels import voxel_representatives, voxel_side_for
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
 from mmreg.estimators._robust_em import (
     _FALSE_ALARMS,
     assign_to_pieces,
+    propose_in_the_rest,
     reads_neighbours,
     refit_clusters,
     robust_multi_model_em,
@@ -39,6 +40,12 @@ _ROBUST_ATTRIBUTES = (
 
 # Points sampled to estimate the spacing of the a-points for the units check.
 _SPACING_SAMPLE = 2000
+# voxel_size="auto": inputs above this many correspondences are fitted on a sample of
+# at most _AUTO_SAMPLE_VOXELS, one per voxel. The loop's cost grows with its rows; at
+# this size an Argoverse 2 sweep's voxels are 0.3 m, small enough to keep a walking
+# pedestrian's handful of rows (see benchmarks/results/real_default_vs_paper.md).
+_AUTO_SAMPLE_ABOVE = 50_000
+_AUTO_SAMPLE_VOXELS = 25_000
 # A gate of fewer than this many nearest-neighbour distances lets a cluster grow by a
 # point or two per iteration and merges nothing: the units of tau are probably wrong.
 _MIN_GATE_SPACINGS = 4.0
@@ -187,14 +194,19 @@ class MultiModelRegistration(BaseRegistration):
         Robust variant: steps of the loop to leave out, for ablations; any of
         ``"trimming"``, ``"range_noise"``, ``"merging"``, ``"static_world"``,
         ``"moving_pieces"``, ``"boundary_layers"``, ``"outliers"``, ``"proposals"`` (see Notes).
-    voxel_size : float or None, default=None
+    voxel_size : float, "auto" or None, default="auto"
         Robust variants: fit on one correspondence per occupied cubic voxel of this side
         (the first of each, in the units of the points; Open3D's ``voxel_down_sample``
         grid), then judge every other correspondence by the fitted clusters as
         :meth:`predict` does, but with the static world's slow pieces keeping their own
-        motions: three times faster on a 100k-point LiDAR sweep at 0.3 m, which is thinned
-        near the sensor and kept whole far from it. Objects must keep ``min_cluster_size``
-        correspondences on the voxel grid. None fits every correspondence.
+        motions, look for new clusters among those that no cluster explains (a small
+        object that the sample saw as a handful of rows), and refit every cluster on
+        all its members. A LiDAR sweep is thinned near the sensor and kept whole far
+        from it. ``"auto"``: inputs of more than 50,000 correspondences are fitted on
+        a sample of 21,250-25,000, the side found by a search on the a-points (at 0.3 m
+        on an 82k-point Argoverse 2 sweep: three times faster); smaller inputs are
+        fitted whole. None fits every correspondence. The paper variant always does
+        (``"auto"`` is None there).
     sigma_floor : float or None, default=None
         Smallest noise scale ``sigma_j``. None uses ``1e-6`` times the RMS spread of the
         b-points, which keeps noiseless data well posed (see Notes).
@@ -237,6 +249,8 @@ class MultiModelRegistration(BaseRegistration):
     init_labels_ : ndarray of shape (n_samples,)
         The initial clusters as given by ``init`` (-1 for the correspondences that
         ``voxel_size`` left out of the fit).
+    voxel_size_ : float or None
+        The voxel side of the sample fitted, None if every correspondence was.
     n_iter_ : int
         Number of EM iterations run.
     converged_ : bool
@@ -395,7 +409,7 @@ class MultiModelRegistration(BaseRegistration):
         "motion_tolerance": [Interval(Real, 0, None, closed="left")],
         "skip_steps": [tuple, list],
         "tol": [Interval(Real, 0, 1, closed="left"), None],
-        "voxel_size": [Interval(Real, 0, None, closed="neither"), None],
+        "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"}), None],
         "random_state": ["random_state"],
         "n_jobs": [Integral, None],
         "verbose": ["verbose"],
@@ -417,7 +431,7 @@ class MultiModelRegistration(BaseRegistration):
         motion_tolerance=0.2,
         tol=None,
         skip_steps=(),
-        voxel_size=None,
+        voxel_size="auto",
         sigma_floor=None,
         random_state=None,
         n_jobs=None,
@@ -537,7 +551,10 @@ class MultiModelRegistration(BaseRegistration):
             a, b = all_a, all_b
             noise_scale = self._noise_scale(a)
             labels = self._judge_the_rest(a, b, rows, result, noise_scale, workers)
-            rotations, translations, sigmas = self._refit_on_all(a, b, labels, result, noise_scale)
+            labels, n_new = self._propose_in_the_rest(a, b, labels, result, noise_scale)
+            rotations, translations, sigmas = self._refit_on_all(
+                a, b, labels, result, noise_scale, len(result.sigmas) + n_new
+            )
             weights = np.bincount(labels[labels >= 0], minlength=len(sigmas)) / n
             self.init_labels_ = np.full(n, -1, dtype=np.intp)
             self.init_labels_[rows] = initial
@@ -555,16 +572,23 @@ class MultiModelRegistration(BaseRegistration):
         return self
 
     def _fitted_rows(self, a):
-        """The rows the loop fits: one per voxel of ``voxel_size``, None for all."""
-        if self.voxel_size is None:
-            return None
-        if self.variant == "paper":
+        """The rows the loop fits: one per voxel of ``voxel_size``, None for all; sets
+        ``voxel_size_``."""
+        self.voxel_size_ = side = self.voxel_size
+        if side == "auto":
+            fitted_whole = self.variant == "paper" or len(a) <= _AUTO_SAMPLE_ABOVE
+            side = None if fitted_whole else voxel_side_for(a, _AUTO_SAMPLE_VOXELS)
+        elif side is not None and self.variant == "paper":
             raise ValueError(
                 "voxel_size needs a robust variant (variant='sweep' or 'robust'); the "
                 "paper variant fits every correspondence, as Algorithm 1 does."
             )
-        rows = voxel_representatives(a, self.voxel_size)
-        return None if len(rows) == len(a) else rows
+        rows = None if side is None else voxel_representatives(a, side)
+        if rows is None or len(rows) == len(a):
+            self.voxel_size_ = None
+            return None
+        self.voxel_size_ = float(side)
+        return rows
 
     def _judge_the_rest(self, a, b, rows, result, noise_scale, workers):
         """Labels of every correspondence, those left out of the fit judged by its
@@ -587,18 +611,47 @@ class MultiModelRegistration(BaseRegistration):
         )
         return labels
 
-    def _refit_on_all(self, a, b, labels, result, noise_scale):
+    def _propose_in_the_rest(self, a, b, labels, result, noise_scale):
+        """New clusters among the correspondences that no piece explains
+        (:func:`propose_in_the_rest`): small objects that the sample saw as a handful."""
+        if "proposals" in self.skip_steps:
+            return labels, 0
+        return propose_in_the_rest(
+            a,
+            b,
+            labels,
+            result.pieces,
+            _static_motion(result),
+            tau=self.tau,
+            log_outlier=result.log_outlier_density,
+            noise_scale=noise_scale,
+            min_cluster_size=self.min_cluster_size,
+            sigma_floor=self.sigma_floor,
+            n_hypotheses=self.n_hypotheses,
+            confidence=self.confidence,
+            min_motion=self.min_motion,
+            static=result.static_cluster,
+            moving=result.moving,
+            motion_tolerance=(
+                self.motion_tolerance
+                if self.variant == "sweep" and "moving_pieces" not in self.skip_steps
+                else None
+            ),
+            sweep=self.variant == "sweep",
+            random_state=self.random_state,
+        )
+
+    def _refit_on_all(self, a, b, labels, result, noise_scale, n_clusters):
         """The clusters' motions and noise scales refitted on all their members, and
         which of them move (``moving_``)."""
         static = result.static_cluster
-        reference = (result.rotations[static], result.translations[static]) if static >= 0 else None
         models, self.moving_ = refit_clusters(
             a,
             b,
             labels,
-            len(result.sigmas),
+            n_clusters,
             static,
-            reference,
+            _static_motion(result),
             sigma_floor=self.sigma_floor,
             noise_scale=noise_scale,
             confidence=self.confidence if "trimming" not in self.skip_steps else 1.0,
@@ -688,3 +741,9 @@ class MultiModelRegistration(BaseRegistration):
         """The robust variants' fitted outlier component; the paper's: the base class's."""
         fitted = getattr(self, "log_outlier_density_", None)
         return super()._log_outlier_density() if fitted is None else fitted
+
+
+def _static_motion(result):
+    """The static world's motion ``(R, t)`` of a robust fit, None without one."""
+    static = result.static_cluster
+    return (result.rotations[static], result.translations[static]) if static >= 0 else None

@@ -41,11 +41,13 @@ from mmreg._neighbors import NeighbourTable
 from mmreg._relabelling import rows_moved
 from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
 from mmreg.estimators._robust_steps import (
+    _with,
     adjacent_pairs,
     assign_correspondences,
     boundary_layers,
     drop_small_clusters,
     estimate_range_growth,
+    fit_clusters,
     join_moving_pieces,
     judge_correspondences,
     log_uniform_density,
@@ -58,6 +60,7 @@ from mmreg.estimators._robust_steps import (
     reject_outliers,
     scattered_clusters,
     squared_residuals,
+    stray_members,
     trimmed_fit,
 )
 
@@ -66,6 +69,7 @@ __all__ = [
     "Pieces",
     "RobustEMResult",
     "assign_to_pieces",
+    "propose_in_the_rest",
     "reads_neighbours",
     "refit_clusters",
     "robust_multi_model_em",
@@ -615,6 +619,182 @@ def assign_to_pieces(
         false_alarms=false_alarms,
     )
     return np.where(judged >= 0, np.append(pieces.reported, -1)[judged], -1)
+
+
+def propose_in_the_rest(
+    a,
+    b,
+    labels,
+    pieces,
+    reference,
+    *,
+    tau,
+    log_outlier,
+    noise_scale=None,
+    min_cluster_size=4,
+    sigma_floor=None,
+    n_hypotheses=32,
+    confidence=0.999,
+    min_motion=0.05,
+    static=-1,
+    moving=None,
+    motion_tolerance=None,
+    sweep=True,
+    random_state=None,
+    max_rounds=4,
+):
+    """New clusters among the correspondences that a fit on a sample left unexplained.
+
+    A fit on one correspondence per voxel sees a small object as a handful of rows, too
+    few to outweigh the objects beside it in the proposals' groups; every row of it, once
+    judged by the pieces (:func:`assign_to_pieces`), is an outlier. Here the proposals
+    (:func:`propose_clusters`, the loop's step 9, with their a-contrario and BIC tests)
+    look at all the outliers, round after round while they find something, each round
+    holding the motions found before it to the test that a proposal brings a new one.
+    A proposal is kept only with a body of its own (:func:`scattered_clusters`' rule,
+    read against the nearest of all the a-points) and, with a static world
+    (``reference``, its motion), moving ``min_motion`` beyond its scatter.
+
+    Parameters
+    ----------
+    a, b : ndarray of shape (n, d)
+    labels : ndarray of shape (n,)
+        The reported clusters, ``-1`` for outliers.
+    pieces : Pieces
+        The fit's pieces: a proposal must have a motion that none of them has.
+    reference : tuple of (ndarray, ndarray) or None
+        The static world's motion ``(R, t)``.
+    static : int, default=-1
+        The static world's reported cluster (-1: none).
+    moving : ndarray of bool of shape (n_clusters,) or None, default=None
+        Which reported clusters move (None: all); a proposal that touches one of them is
+        not kept.
+    motion_tolerance : float or None, default=None
+        A new cluster that touches a moving cluster whose motion agrees with its own
+        within this fraction (:func:`join_moving_pieces`) is given to it; None: never.
+    sweep : bool, default=True
+        The proposals of the sweep variant (a noise scale of their own), or the robust
+        default's (the smallest of the pieces').
+    random_state : int, RandomState instance or None, default=None
+        Seeds the proposals' samples.
+    max_rounds : int, default=4
+
+    Returns
+    -------
+    labels : ndarray of shape (n,)
+        The new clusters numbered after the others, in the order found.
+    n_new : int
+    """
+    n, d = a.shape
+    unexplained = labels < 0
+    if pieces is None or np.count_nonzero(unexplained) < min_cluster_size:
+        return labels, 0
+    if sigma_floor is None:
+        sigma_floor = default_sigma_floor(b)
+    rng = check_random_state(random_state)
+    models = pieces.models
+    scale = float(np.min(models.sigmas))
+    log_volume_density = log_uniform_density(a, b)
+    tree = None  # of all the a-points, once a proposal is to be judged
+    next_label = max(int(labels.max()) + 1 if labels.size else 0, 0)
+    moves = np.ones(next_label, dtype=bool) if moving is None else np.asarray(moving, dtype=bool)
+    next_label = max(next_label, len(moves))
+    labels = labels.copy()
+    n_new = 0
+    for _ in range(max_rounds):
+        found = propose_clusters(
+            a,
+            b,
+            unexplained,
+            tau if tau is not None else np.inf,
+            scale,
+            log_outlier,
+            n,
+            rng,
+            log_volume_density=log_volume_density,
+            models=models,
+            min_cluster_size=min_cluster_size,
+            sigma_floor=sigma_floor,
+            noise_scale=noise_scale,
+            n_hypotheses=n_hypotheses,
+            confidence=confidence,
+            reference=reference,
+            per_cluster=sweep,
+        )
+        if not found:
+            break
+        for group in found:
+            unexplained[group] = False
+        if reference is not None:
+            slowly = moves_slowly(a, b, found, reference, sigma_floor, min_motion, noise_scale)
+            found = list(compress(found, ~slowly))
+        tree = cKDTree(a) if tree is None else tree
+        found = [group for group in found if _has_a_body(tree, labels, moves, group)]
+        if not found:
+            continue
+        rows = np.concatenate(found)
+        own = np.repeat(np.arange(len(found)), [len(group) for group in found])
+        fitted = fit_clusters(
+            a[rows],
+            b[rows],
+            own,
+            len(found),
+            sigma_floor,
+            None if noise_scale is None else noise_scale[rows],
+        )
+        models = _with(models, fitted)
+        moves = np.append(moves, np.ones(len(found), dtype=bool))
+        labels[rows] = next_label + own
+        next_label += len(found)
+        n_new += len(found)
+    if n_new and motion_tolerance:
+        labels, n_new = _join_new_pieces(
+            a, b, labels, next_label - n_new, static, sigma_floor, motion_tolerance
+        )
+    return labels, n_new
+
+
+def _join_new_pieces(a, b, labels, first_new, static, sigma_floor, tolerance):
+    """The new clusters that :func:`join_moving_pieces` joins to another cluster given
+    to it (a part of a car whose flow bends, left out by the sample's fit); the
+    clusters found before are left as they were."""
+    n_clusters = int(labels.max()) + 1
+    models = fit_clusters(a, b, labels, n_clusters, sigma_floor)
+    root, _, n_joined = join_moving_pieces(
+        a, labels, models, static, a.shape[1], sigma_floor, tolerance=tolerance
+    )
+    if not n_joined:
+        return labels, n_clusters - first_new
+    target = np.arange(n_clusters)
+    target[first_new:] = root[first_new:]
+    kept = np.unique(target)
+    renumber = np.full(n_clusters + 1, -1, dtype=np.intp)
+    renumber[kept] = np.arange(len(kept))
+    labels = np.where(labels >= 0, renumber[target[np.maximum(labels, 0)]], -1)
+    return labels, len(kept) - first_new
+
+
+def _has_a_body(tree, labels, moves, group, k=16, thickness=3.0):
+    """Whether ``group`` is a body of its own among all the points, read off each
+    member's ``k`` nearest points: not scattered (more than half of its members strays,
+    :func:`stray_members`), not a layer along another cluster (more than half of its
+    members with a point of a cluster in ``labels`` within ``thickness`` times the
+    group's median spacing, :func:`boundary_layers`), and touching no moving cluster
+    (``moves``, per cluster), whose sample the fit saw: what it left beside a moving
+    object is flow that bled from it."""
+    k = min(k, tree.n)
+    distance, nearest = tree.query(tree.data[group], k=k)
+    inside = np.zeros(tree.n, dtype=bool)
+    inside[group] = True
+    listed = inside[nearest[:, 1:]].astype(np.intp)
+    depth = np.full(len(group), min(k - 1, len(group) - 1))
+    stray = stray_members(np.ones(len(group), dtype=np.intp), listed, depth)
+    limit = thickness * np.median(distance[:, 1])
+    around = (labels[nearest] >= 0) & ~inside[nearest] & (distance <= limit)
+    near = np.count_nonzero(around.any(axis=1))
+    touches = np.any(around & np.append(moves, False)[labels[nearest]])
+    needed = (len(group) - 1) // 2 + 1
+    return 2 * np.count_nonzero(stray) <= len(group) and near < needed and not touches
 
 
 def refit_clusters(

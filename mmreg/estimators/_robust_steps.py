@@ -1009,12 +1009,21 @@ def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
     for start in range(0, len(rows), _BLOCK_ROWS):
         block = slice(start, start + _BLOCK_ROWS)
         listed = labels[neighbours.index[rows[block], 1:]]
-        mine = np.cumsum(listed == own[block, None], axis=1, dtype=np.int16)
-        looked = np.flatnonzero(depth[block] > 0)
-        reach = depth[block][looked]
-        stray[start + looked] = 4 * mine[looked, reach - 1] < reach
+        stray[block] = stray_members(own[block], listed, depth[block])
     n_strays = np.bincount(own[stray], minlength=n_clusters)
     return np.flatnonzero(2 * n_strays > size)
+
+
+def stray_members(own, listed, depth):
+    """Rows fewer than a quarter of whose first ``depth`` listed neighbours share their
+    label ``own`` (:func:`scattered_clusters`); ``listed``: the neighbours' labels,
+    nearest first, the row itself left out. A row with ``depth`` 0 is no stray."""
+    mine = np.cumsum(listed == own[:, None], axis=1, dtype=np.int16)
+    stray = np.zeros(len(own), dtype=bool)
+    looked = np.flatnonzero(depth > 0)
+    reach = depth[looked]
+    stray[looked] = 4 * mine[looked, reach - 1] < reach
+    return stray
 
 
 def _clusters_named(clusters):
