@@ -183,7 +183,7 @@ def row_1m(quick):
     rows = []
     for variant, kwargs in (
         ("", {}),
-        ('variant="sweep"', {"variant": "sweep"}),
+        ("voxel_size=None", {"voxel_size": None}),
         ("voxel_size=0.1", {"voxel_size": 0.1}),
     ):
         row = _fit_row(
@@ -216,7 +216,7 @@ def row_far(quick):
             1,
             scene.labels,
         )
-        for variant, kwargs in (("", {}), ('variant="sweep"', {"variant": "sweep"}))
+        for variant, kwargs in (("", {}), ("voxel_size=None", {"voxel_size": None}))
     ]
     return rows, floors(scene.X, 1)
 
@@ -278,7 +278,7 @@ def row_register(quick):
         X = make_scene(20, n, noise=0.03, random_state=0).X
         np.save(path, X)
         rows = []
-        for options in ([], ["--voxel-size", "0.1"]):
+        for options in ([], ["--voxel-size", "none"], ["--voxel-size", "0.1"]):
             out = Path(folder) / f"result{len(rows)}"
             start = time.perf_counter()
             done = subprocess.run(

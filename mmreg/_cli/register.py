@@ -383,7 +383,9 @@ def _fit(X, init, args, steps, sweep=None):
     with steps.step("EM" if sweep is None else "EM and ICP on --sweep"), reported_warnings():
         estimator.fit(X, **({} if sweep is None else {"sweep": sweep}))
     if voxel_size is not None and X.shape[1] == 6:
-        labels = estimator.init_labels_
+        # The initial clusters of the fit (a wrapped estimator's, with --sweep).
+        fitted = getattr(estimator, "estimator_", estimator)
+        labels = getattr(fitted, "init_labels_", labels)
     n_initial = int(labels.max(initial=-1)) + 1 if hasattr(labels, "max") else 0
     return estimator, n_initial
 
