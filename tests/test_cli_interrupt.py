@@ -36,7 +36,9 @@ def _big_input(path):
 def _start(path, out, cwd):
     process = subprocess.Popen(
         [sys.executable, "-m", "mmreg.cli", "register", str(path), "--out", str(out)]
-        + ["--n-jobs", "-1", "-q", "-v"],
+        # Every row fitted (a voxel sample would finish before most signals arrive), so
+        # that the signals land in the initial clustering, the EM or the writing.
+        + ["--n-jobs", "-1", "-q", "-v", "--voxel-size", "none"],
         cwd=cwd,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
