@@ -2,7 +2,7 @@
 
 import numpy as np
 
-__all__ = ["occupied_voxels", "voxel_representatives", "voxel_side_for"]
+__all__ = ["occupied_voxels", "voxel_representatives", "voxel_sample", "voxel_side_for"]
 
 
 def voxel_representatives(points, size):
@@ -52,11 +52,8 @@ def occupied_voxels(points, size):
 
 def voxel_side_for(points, n_voxels, *, slack=0.15, max_steps=12):
     """A voxel side whose grid holds between ``(1 - slack) n_voxels`` and ``n_voxels``
-    occupied voxels, None if the points occupy fewer voxels than that at any side.
-
-    The count falls with the side as a power law (about ``side^-2`` on surfaces), so the
-    search steps along the secant of ``log count`` against ``log side``, bisecting when
-    a step would leave the bracket found so far. It is a function of the points alone.
+    occupied voxels, None if the points occupy fewer voxels than that at any side
+    (:func:`voxel_sample`, without the rows).
 
     Parameters
     ----------
@@ -80,23 +77,51 @@ def voxel_side_for(points, n_voxels, *, slack=0.15, max_steps=12):
     >>> 850 <= occupied_voxels(points, side) <= 1_000
     True
     """
+    return voxel_sample(points, n_voxels, slack=slack, max_steps=max_steps)[0]
+
+
+def voxel_sample(points, n_voxels, *, slack=0.15, max_steps=12):
+    """The side of :func:`voxel_side_for` and its :func:`voxel_representatives`.
+
+    The count falls with the side as a power law (about ``side^-2`` on surfaces), so the
+    search steps along the secant of ``log count`` against ``log side``, bisecting when
+    a step would leave the bracket found so far. It is a function of the points alone.
+    The rows are those of the search's last count, not listed again.
+
+    Returns
+    -------
+    side : float or None
+    rows : ndarray of shape (m,) or None
+        None with ``side``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._voxels import voxel_sample
+    >>> points = np.random.default_rng(0).uniform(size=(20_000, 3))
+    >>> side, rows = voxel_sample(points, 1_000)
+    >>> 850 <= len(rows) <= 1_000
+    True
+    """
     points = np.asarray(points, dtype=float)
     extent = float(np.max(np.ptp(points, axis=0))) if len(points) else 0.0
     if len(points) <= n_voxels or extent == 0:
-        return None
+        return None, None
     low = n_voxels * (1 - slack)
     side = extent / n_voxels ** (1 / points.shape[1])
-    small, large = None, None  # (side, count): above the target, at most the target
+    small, large = None, None  # (side, count) above the target; (side, rows) within it
     for _ in range(max_steps):
-        count = occupied_voxels(points, side)
+        rows = voxel_representatives(points, side)
+        count = len(rows)
         if count > n_voxels:
             small = (side, count)
         else:
-            large = (side, count) if large is None or count > large[1] else large
+            large = (side, rows) if large is None or count > len(large[1]) else large
             if count >= low:
-                return side
-        side = _next_side(small, large, (side, count), np.sqrt(low * n_voxels))
-    return None if large is None else large[0]
+                return side, rows
+        bracket_end = None if large is None else (large[0], len(large[1]))
+        side = _next_side(small, bracket_end, (side, count), np.sqrt(low * n_voxels))
+    return (None, None) if large is None else large
 
 
 def _next_side(small, large, last, target):

@@ -14,7 +14,7 @@ from sklearn.utils.validation import check_is_fitted
 from mmreg._gate import ClusterGate
 from mmreg._neighbors import NeighbourTable
 from mmreg._validation import check_labels
-from mmreg._voxels import voxel_representatives, voxel_side_for
+from mmreg._voxels import voxel_representatives, voxel_sample
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
 from mmreg.estimators._robust_em import (
@@ -574,16 +574,19 @@ class MultiModelRegistration(BaseRegistration):
     def _fitted_rows(self, a):
         """The rows the loop fits: one per voxel of ``voxel_size``, None for all; sets
         ``voxel_size_``."""
-        self.voxel_size_ = side = self.voxel_size
+        side, rows = self.voxel_size, None
         if side == "auto":
-            fitted_whole = self.variant == "paper" or len(a) <= _AUTO_SAMPLE_ABOVE
-            side = None if fitted_whole else voxel_side_for(a, _AUTO_SAMPLE_VOXELS)
-        elif side is not None and self.variant == "paper":
-            raise ValueError(
-                "voxel_size needs a robust variant (variant='sweep' or 'robust'); the "
-                "paper variant fits every correspondence, as Algorithm 1 does."
-            )
-        rows = None if side is None else voxel_representatives(a, side)
+            if self.variant != "paper" and len(a) > _AUTO_SAMPLE_ABOVE:
+                side, rows = voxel_sample(a, _AUTO_SAMPLE_VOXELS)
+            else:
+                side = None
+        elif side is not None:
+            if self.variant == "paper":
+                raise ValueError(
+                    "voxel_size needs a robust variant (variant='sweep' or 'robust'); the "
+                    "paper variant fits every correspondence, as Algorithm 1 does."
+                )
+            rows = voxel_representatives(a, side)
         if rows is None or len(rows) == len(a):
             self.voxel_size_ = None
             return None

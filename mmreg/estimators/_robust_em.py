@@ -636,8 +636,8 @@ def propose_in_the_rest(
     n_hypotheses=32,
     confidence=0.999,
     min_motion=0.05,
+    moving,
     static=-1,
-    moving=None,
     motion_tolerance=None,
     sweep=True,
     random_state=None,
@@ -664,11 +664,11 @@ def propose_in_the_rest(
         The fit's pieces: a proposal must have a motion that none of them has.
     reference : tuple of (ndarray, ndarray) or None
         The static world's motion ``(R, t)``.
+    moving : ndarray of bool of shape (n_clusters,)
+        Which reported clusters move; a proposal that touches one of them is not kept.
+        New clusters are numbered from ``n_clusters`` on.
     static : int, default=-1
         The static world's reported cluster (-1: none).
-    moving : ndarray of bool of shape (n_clusters,) or None, default=None
-        Which reported clusters move (None: all); a proposal that touches one of them is
-        not kept.
     motion_tolerance : float or None, default=None
         A new cluster that touches a moving cluster whose motion agrees with its own
         within this fraction (:func:`join_moving_pieces`) is given to it; None: never.
@@ -696,9 +696,8 @@ def propose_in_the_rest(
     scale = float(np.min(models.sigmas))
     log_volume_density = log_uniform_density(a, b)
     tree = None  # of all the a-points, once a proposal is to be judged
-    next_label = max(int(labels.max()) + 1 if labels.size else 0, 0)
-    moves = np.ones(next_label, dtype=bool) if moving is None else np.asarray(moving, dtype=bool)
-    next_label = max(next_label, len(moves))
+    moves = np.asarray(moving, dtype=bool)
+    next_label = len(moves)
     labels = labels.copy()
     n_new = 0
     for _ in range(max_rounds):
