@@ -205,3 +205,73 @@ def test_a_slow_piece_among_the_static_worlds_points_is_not_dissolved():
     assert [step["bled"] for step in result.history] == [0] * result.n_iter
     assert np.all(result.labels[: len(world)] == result.static_cluster)
     assert np.all(result.labels[len(world) :] == 1 - result.static_cluster)
+
+
+def _merge_every_pair_every_round(models, pairs, d, sigma_floor):
+    """The reference: every remaining pair tested again in every round."""
+    k = len(models.sigmas)
+    parent = np.arange(k)
+    models = models.take(np.arange(k))
+    while len(pairs):
+        ratio = robust_steps._merge_ratio(models, pairs, d)
+        good = ratio < 1.0
+        if not good.any():
+            break
+        pairs, ratio = pairs[good], ratio[good]
+        order = np.lexsort((np.arange(len(ratio)), ratio))
+        pairs, ratio = pairs[order], ratio[order]
+        first = np.full(k, len(ratio))
+        np.minimum.at(first, pairs[:, 0], np.arange(len(ratio)))
+        np.minimum.at(first, pairs[:, 1], np.arange(len(ratio)))
+        index = np.arange(len(ratio))
+        chosen = (first[pairs[:, 0]] == index) & (first[pairs[:, 1]] == index)
+        keep, gone = pairs[chosen, 0], pairs[chosen, 1]
+        refit = robust_steps._models_from_moments(
+            models.moments.take(keep) + models.moments.take(gone), d, sigma_floor
+        )
+        size_keep, size_gone = models.moments.size[keep], models.moments.size[gone]
+        refit.sigmas = np.sqrt(
+            (size_keep * models.sigmas[keep] ** 2 + size_gone * models.sigmas[gone] ** 2)
+            / np.maximum(size_keep + size_gone, 1)
+        )
+        models.put(keep, refit)
+        parent[gone] = keep
+        remap = np.arange(k)
+        remap[gone] = keep
+        pairs = np.sort(remap[pairs], axis=1)
+        pairs = np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
+    while not np.array_equal(parent[parent], parent):
+        parent = parent[parent]
+    return parent
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n_motions=st.integers(1, 4),
+    pieces=st.integers(2, 12),
+    adjacency=st.floats(0.2, 1.0),
+)
+def test_merging_retests_only_merged_pairs_and_matches_retesting_all(
+    seed, n_motions, pieces, adjacency
+):
+    # Many pieces of a few motions (several rounds of mutual best partners), some pairs
+    # adjacent: the rounds, and so the roots, must be those of testing every pair again.
+    rng = np.random.default_rng(seed)
+    k = n_motions * pieces
+    motion = rng.integers(n_motions, size=k)
+    turns = [np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(n_motions)]
+    turns = [q * np.sign(np.linalg.det(q)) for q in turns]
+    shifts = rng.normal(size=(n_motions, 3))
+    size = rng.integers(5, 40, size=k)
+    labels = np.repeat(np.arange(k), size)
+    a = rng.normal(size=(len(labels), 3)) + rng.normal(size=(k, 3))[labels] * 3.0
+    b = np.einsum("nij,nj->ni", np.array(turns)[motion[labels]], a) + shifts[motion[labels]]
+    b += rng.normal(size=a.shape) * rng.uniform(0.001, 0.05, size=k)[labels, None]
+    models = _models(a, b, labels, k)
+    i, j = np.triu_indices(k, 1)
+    pairs = np.column_stack([i, j])[rng.random(len(i)) < adjacency]
+    expected = _merge_every_pair_every_round(models, pairs, 3, 1e-9)
+    root, _, n_merges = robust_steps.merge_adjacent(models, pairs, 3, 1e-9)
+    np.testing.assert_array_equal(root, expected)
+    assert n_merges == k - len(np.unique(expected))

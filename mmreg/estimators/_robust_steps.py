@@ -615,8 +615,13 @@ def merge_adjacent(models, pairs, d, sigma_floor):
     parent = np.arange(k)
     n_merges = 0
     models = models.take(np.arange(k))  # a copy: entries are overwritten below
+    # A pair's statistic depends on its two clusters alone: after a round only the pairs
+    # of merged clusters (NaN) are tested again, which gives the same rounds as testing
+    # every pair every round.
+    ratio = np.full(len(pairs), np.nan)
     while len(pairs):
-        ratio = _merge_ratio(models, pairs, d)
+        stale = np.isnan(ratio)
+        ratio[stale] = _merge_ratio(models, pairs[stale], d)
         good = ratio < 1.0
         if not good.any():
             break
@@ -644,7 +649,15 @@ def merge_adjacent(models, pairs, d, sigma_floor):
         remap = np.arange(k)
         remap[gone] = keep
         pairs = np.sort(remap[pairs], axis=1)
-        pairs = np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
+        changed = np.zeros(k, dtype=bool)
+        changed[keep] = True
+        stale = changed[pairs].any(axis=1)
+        retested = np.unique(pairs[stale & (pairs[:, 0] != pairs[:, 1])], axis=0)
+        pairs = np.vstack([pairs[~stale], retested])
+        ratio = np.concatenate([ratio[~stale], np.full(len(retested), np.nan)])
+        # Ascending pairs, as np.unique gives them: the tie-break above reads this order.
+        order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+        pairs, ratio = pairs[order], ratio[order]
     root = parent
     while True:
         nxt = root[root]
