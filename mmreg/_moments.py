@@ -133,23 +133,23 @@ def group_moments(a, b, labels, n_groups, weights=None):
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     labels = np.asarray(labels, dtype=np.intp)
-    keep = labels >= 0
     w = np.ones(len(labels)) if weights is None else np.asarray(weights, dtype=float)
-    if not keep.all():
-        a, b, labels, w = a[keep], b[keep], labels[keep], w[keep]
+    # The rows left out are summed into one extra group, dropped: each group's sums add
+    # the same values in the same order as over its rows alone, without copying the rows.
+    labels = np.where(labels >= 0, labels, n_groups)
     d = a.shape[1]
-    size = np.bincount(labels, minlength=n_groups)[:n_groups]
+    size = np.bincount(labels, minlength=n_groups + 1)[:n_groups]
 
     def sums(column):
-        return np.bincount(labels, weights=column, minlength=n_groups)[:n_groups]
+        return np.bincount(labels, weights=column, minlength=n_groups + 1)[:n_groups]
 
     count = sums(w)
     safe = np.where(count > 0, count, 1.0)
     mean_a = np.column_stack([sums(w * a[:, k]) for k in range(d)]) / safe[:, None]
     mean_b = np.column_stack([sums(w * b[:, k]) for k in range(d)]) / safe[:, None]
     # Centred first: raw second moments cancel badly far from the origin.
-    ca = a - mean_a[labels]
-    cb = b - mean_b[labels]
+    ca = a - np.take(np.vstack([mean_a, np.zeros(d)]), labels, axis=0)
+    cb = b - np.take(np.vstack([mean_b, np.zeros(d)]), labels, axis=0)
     wa = ca * w[:, None]
     cross = np.empty((n_groups, d, d))
     for p in range(d):

@@ -420,11 +420,14 @@ def _next_to_another_group(points, labels, radius):
     strides = np.ravel_multi_index(np.ones(d, dtype=np.int64), shape)
     for offset in np.ndindex(*(3,) * d):
         step = np.ravel_multi_index(np.array(offset), shape) - strides
-        if step == 0:
+        # Adjacency is symmetric: each pair of cells is looked up once, from the cell
+        # with the lower code, and flags both.
+        if step <= 0:
             continue
         neighbour = np.searchsorted(cell_codes, cell_codes + step)
         neighbour = np.minimum(neighbour, n_cells - 1)
         occupied = cell_codes[neighbour] == cell_codes + step
         other = occupied & ((low[neighbour] != low) | (high[neighbour] != high))
         flagged |= other
+        flagged[neighbour[other]] = True
     return flagged[cell_of]
