@@ -5,7 +5,10 @@ A job is a small frozen dataclass (picklable: it holds paths, not data) with a u
 a dict with ``X`` (n, 6) and, when the data have them, ``labels_true`` (n,) (negative:
 unknown or outlier, not scored) and ``flow_true`` (n, 3). A job of two raw sweeps
 (``pairs="sweeps"``) gives ``X`` (n, 3), the first sweep, and ``sweep`` (m, 3), the second
-(any size, any order), for :class:`mmreg.SweepRegistration`.
+(any size, any order), for :class:`mmreg.SweepRegistration`; an Argoverse 2 one also gives
+the capture times of both sweeps' points, ``times`` (n,) and ``sweep_times`` (m,) (seconds
+after each sweep's timestamp, from ``offset_ns``), and ``interval``, the seconds between
+the two timestamps, unless every offset is zero or ``capture_times=False``.
 
 :func:`dataset_jobs` lists the jobs of a folder:
 
@@ -18,7 +21,7 @@ unknown or outlier, not scored) and ``flow_true`` (n, 3). A job of two raw sweep
 * with ``pairs="sweeps"``, the frames or an Argoverse 2 log's sweeps are raw sweeps: one
   job per consecutive pair, sweep ``k`` registered to sweep ``k + 1`` from the points
   alone (any sizes and orders); an Argoverse 2 job is still scored against the true flow
-  of sweep ``k``;
+  of sweep ``k``, and gives its points' capture times (``capture_times``);
 * a folder of correspondence files (``*.npy`` (n, 6), ``*.npz``, ``*.csv``, ``*.txt``):
   one job per file. An ``.npz`` may also hold the truth: ``labels`` (n,) and ``flow``
   (n, 3).
@@ -135,13 +138,18 @@ class Argoverse2SweepPairJob:
     """Sweep pair ``index`` of an Argoverse 2 log as two raw sweeps, scored by the true flow.
 
     ``X`` is sweep t's points and ``sweep`` sweep t+1's (both without the ground when
-    ``drop_ground``); the true flow and labels are those of sweep t.
+    ``drop_ground``); the true flow and labels are those of sweep t. With
+    ``capture_times``, ``times`` and ``sweep_times`` are the points' capture times (the
+    sweep files' ``offset_ns``, in seconds) and ``interval`` the seconds between the two
+    sweeps' timestamps, for ``SweepRegistration.fit``'s deskewing; left out when the
+    files have no offsets or all of them are zero (nothing to deskew).
     """
 
     name: str
     log_dir: str
     index: int
     drop_ground: bool = True
+    capture_times: bool = True
 
     def load(self):
         from mmreg.datasets import load_argoverse2
@@ -152,19 +160,28 @@ class Argoverse2SweepPairJob:
                 f"{self.log_dir}: no lidar sweep at {scene.timestamps[1]}, the next pose's "
                 "time; pairs='sweeps' needs both sweeps."
             )
-        return {
+        data = {
             "X": scene.a,
             "sweep": scene.sweep2,
             "labels_true": scene.labels,
             "flow_true": scene.flow,
         }
+        times, sweep_times = scene.times, scene.sweep2_times
+        if (
+            self.capture_times
+            and times is not None
+            and sweep_times is not None
+            and (np.any(times != 0) or np.any(sweep_times != 0))
+        ):
+            data.update(times=times, sweep_times=sweep_times, interval=float(scene.dt))
+        return data
 
 
 def _is_argoverse2_log(folder):
     return (Path(folder) / "sensors" / "lidar").is_dir()
 
 
-def _argoverse2_jobs(log_dir, drop_ground, pairs, prefix=""):
+def _argoverse2_jobs(log_dir, drop_ground, pairs, capture_times, prefix=""):
     from mmreg.datasets import Argoverse2Log
 
     log = Argoverse2Log(log_dir)
@@ -173,7 +190,9 @@ def _argoverse2_jobs(log_dir, drop_ground, pairs, prefix=""):
         # Only pairs of sweeps: the last sweep of a truncated log may be paired with an
         # annotated time that has no sweep (its flow is known, its points are not).
         return [
-            Argoverse2SweepPairJob(f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground)
+            Argoverse2SweepPairJob(
+                f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground, capture_times
+            )
             for i in range(len(stamps) - 1)
         ]
     return [
@@ -195,7 +214,7 @@ def _npy_columns(path):
     return shape[1] if len(shape) == 2 else None
 
 
-def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned"):
+def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned", capture_times=True):
     """The jobs of the dataset at ``path`` (a folder), in a stable order.
 
     Parameters
@@ -215,6 +234,12 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned"):
         and orders, to register from the points alone with
         :class:`mmreg.SweepRegistration` (Argoverse 2: still scored against the true
         flow). Not for a folder of correspondence files.
+    capture_times : bool, default=True
+        Argoverse 2 with ``pairs="sweeps"``: hand the points' capture times (the sweep
+        files' ``offset_ns``) and the interval between the sweeps to the estimator, whose
+        ``fit`` deskews the moving objects with them (:class:`mmreg.SweepRegistration`).
+        False: register the sweeps as if every point were taken at its sweep's
+        timestamp. Ignored for the other layouts (their files carry no times).
 
     Returns
     -------
@@ -246,6 +271,9 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned"):
         raise ValueError(f"layout must be one of {allowed}; got {layout!r}.")
     if pairs not in PAIRS:
         raise ValueError(f"pairs must be one of {PAIRS}; got {pairs!r}.")
+    if not isinstance(capture_times, (bool, np.bool_)):
+        raise TypeError(f"capture_times must be True or False; got {capture_times!r}.")
+    capture_times = bool(capture_times)
     folder = Path(path)
     if not folder.exists():
         raise FileNotFoundError(f"{folder}: no such folder (the dataset).")
@@ -253,13 +281,13 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned"):
         raise ValueError(f"{folder}: not a folder; a dataset is a folder of files or logs.")
     if layout in ("auto", "argoverse2"):
         if _is_argoverse2_log(folder):
-            return _check_some(_argoverse2_jobs(folder, drop_ground, pairs), folder)
+            return _check_some(_argoverse2_jobs(folder, drop_ground, pairs, capture_times), folder)
         logs = sorted(p for p in folder.iterdir() if p.is_dir() and _is_argoverse2_log(p))
         if logs:
             jobs = [
                 job
                 for log in logs
-                for job in _argoverse2_jobs(log, drop_ground, pairs, f"{log.name}_")
+                for job in _argoverse2_jobs(log, drop_ground, pairs, capture_times, f"{log.name}_")
             ]
             return _check_some(jobs, folder)
         if layout == "argoverse2":

@@ -15,6 +15,9 @@ correspondences
     (``target``) or the per-point flow (``flow``).
 labels
     ``.npy`` or ``.csv`` / ``.txt`` (one integer per line, an optional header row).
+capture times
+    ``.npy`` or ``.csv`` / ``.txt`` (one number of seconds per line, an optional header
+    row).
 motions
     JSON: a list with one object per motion (see :func:`write_motions`).
 point clouds
@@ -74,6 +77,7 @@ __all__ = [
     "read_labels",
     "read_motions",
     "read_point_cloud",
+    "read_times",
     "write_correspondences",
     "write_labels",
     "write_motions",
@@ -1134,6 +1138,65 @@ def write_labels(path, labels):
             if suffix == ".csv":
                 handle.write("label\n")
             handle.write("".join(f"{int(v)}\n" for v in labels))
+
+
+# --------------------------------------------------------------------------- times
+def read_times(path):
+    """Read one capture time per point, in seconds (e.g. after its sweep's reference time).
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``.npy`` (a 1-D or one-column array of numbers) or ``.csv`` / ``.txt`` (one number
+        per line, an optional header row).
+
+    Returns
+    -------
+    times : ndarray of shape (n,), dtype float64
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file is missing.
+    ValueError
+        If it is unreadable, corrupt, empty, not one column, holds NaN or infinity, or
+        the extension is unknown.
+    TypeError
+        If it does not hold numbers.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from mmreg.io import read_times
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     np.save(Path(folder) / "times.npy", np.array([0.0, 0.05, 0.1]))
+    ...     print(read_times(Path(folder) / "times.npy").tolist())
+    [0.0, 0.05, 0.1]
+    """
+    path = _check_readable(path)
+    suffix = _extension(path, (".npy", *_TEXT_EXTENSIONS), "capture times")
+    times = _load_npy(path) if suffix == ".npy" else _load_text_table(path)
+    times = np.asarray(times)
+    if times.ndim == 2 and times.shape[1] == 1:
+        times = times[:, 0]
+    if times.ndim != 1:
+        raise ValueError(
+            f"{path}: capture times must be one column (one per point); got shape {times.shape}."
+        )
+    if times.dtype.kind == "b":
+        raise TypeError(f"{path}: capture times must be numbers of seconds; got booleans.")
+    times = _as_numeric(times, path, "the capture times")
+    if len(times) == 0:
+        raise ValueError(f"{path}: holds no capture times; one per point is needed.")
+    bad = np.flatnonzero(~np.isfinite(times))
+    if len(bad):
+        raise ValueError(
+            f"{path}: capture times contain NaN or infinity ({len(bad)} rows, the first is row "
+            f"{bad[0]})."
+        )
+    return times
 
 
 # --------------------------------------------------------------------------- motions

@@ -14,6 +14,11 @@ fingerprint of (job, estimator) the result belongs to.
 A job of two raw sweeps (``dataset_jobs(..., pairs="sweeps")``) loads the first sweep
 ``X`` (n, 3) and the second ``sweep`` (m, 3); it is fitted as ``fit(X, sweep=sweep)``,
 by :func:`default_sweep_estimator` unless another estimator taking ``sweep`` is given.
+When the job also loads the points' capture times (``times``, ``sweep_times``) and the
+``interval`` between the sweeps (Argoverse 2), they are passed too if the estimator's
+``fit`` names all three as parameters (:class:`~mmreg.SweepRegistration` deskews the
+moving objects with them); any other estimator is fitted as before. The summary's
+``capture_times`` column says whether a job's fit had them.
 """
 
 import contextlib
@@ -87,13 +92,36 @@ def default_sweep_estimator():
 
 # Jobs whose load() gives a second sweep to fit on (fit(X, sweep=...)).
 _SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob)
+# What a job of two sweeps may add for fit: the capture times of both sweeps' points and
+# the seconds between the sweeps' reference times (SweepRegistration.fit's names).
+_TIMING = ("times", "sweep_times", "interval")
+
+
+def _fit_parameters(estimator):
+    """The names ``estimator.fit`` takes as named parameters, or None if it has no signature.
+
+    A ``**kwargs`` catch-all does not count: a Pipeline's ``fit(X, **params)`` refuses
+    what it does not route.
+    """
+    try:
+        parameters = inspect.signature(estimator.fit).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    named = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return {p.name for p in parameters if p.kind in named}
 
 
 def _takes_sweep(estimator):
-    try:
-        return "sweep" in inspect.signature(estimator.fit).parameters
-    except (TypeError, ValueError):  # no signature to read: let fit decide
-        return True
+    names = _fit_parameters(estimator)
+    return names is None or "sweep" in names  # no signature to read: let fit decide
+
+
+def _takes_times(estimator):
+    # Unlike the sweep (without which a job of two sweeps cannot be fitted), the times
+    # are an addition: given only to a fit that names them, so other estimators are
+    # fitted exactly as without.
+    names = _fit_parameters(estimator)
+    return names is not None and set(_TIMING) <= names
 
 
 def _describe(value):
@@ -144,6 +172,13 @@ def _metrics(X, estimator, data):
         if keep.any():
             found = scene_flow_metrics(flow_true[keep], flow)
             scores.update({name.lower(): value for name, value in found.items()})
+        if truth is not None and len(truth):
+            # The mean end-point error on the static world (the largest object) and on
+            # the points of every other object (the moving ones), apart.
+            error = np.linalg.norm(flow - flow_true[keep], axis=1)
+            static = truth == ids[np.argmax(sizes)]
+            scores["epe_static"] = float(error[static].mean())
+            scores["epe_moving"] = float(error[~static].mean()) if (~static).any() else math.nan
     return scores
 
 
@@ -166,10 +201,19 @@ def _process(job, estimator):
             row["n_sweep"] = len(sweep)
         row["load_s"] = time.perf_counter() - start
         model = clone(estimator)
+        params = {} if sweep is None else {"sweep": sweep}
+        timed = (
+            sweep is not None
+            and all(data.get(key) is not None for key in _TIMING)
+            and _takes_times(model)
+        )
+        if timed:
+            params.update({key: data[key] for key in _TIMING})
+        row["capture_times"] = timed
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            model.fit(X, **({} if sweep is None else {"sweep": sweep}))
+            model.fit(X, **params)
         row["fit_s"] = time.perf_counter() - start
         moving = getattr(model, "moving_", None)
         row.update(
@@ -312,8 +356,10 @@ def run_dataset(
         unique ``name`` (a file name) and a ``load()`` returning ``{"X": (n, 6)}``, plus
         ``"labels_true"`` (n,) and ``"flow_true"`` (n, 3) when the truth is known, and
         ``"sweep"`` (m, 3) for a job of two raw sweeps (then ``X`` may be (n, 3): the
-        first sweep; see ``pairs`` of :func:`dataset_jobs`). They are pickled to the
-        workers, which must be able to read the files they name.
+        first sweep; see ``pairs`` of :func:`dataset_jobs`), with ``"times"`` (n,),
+        ``"sweep_times"`` (m,) and ``"interval"`` (seconds) when the points' capture
+        times are known: these go to ``fit`` when it names all three as parameters. The
+        jobs are pickled to the workers, which must be able to read the files they name.
     estimator : estimator, default=None
         A scikit-learn style estimator (``fit(X)``, ``labels_``, ``rotations_``,
         ``translations_``, ``sigmas_``, ``flow_``); None: :func:`default_estimator`, or
@@ -345,7 +391,10 @@ def run_dataset(
         the truth ``iou``, ``objects_found``, ``moving_objects``, ``moving_found``
         (objects besides the largest found with IoU >= 0.5), ``epe3d``, ``acc3ds``,
         ``acc3dr``, ``outliers3d`` (of the rigid flow, :func:`mmreg.metrics.
-        scene_flow_metrics`). Points with a negative true label are not scored.
+        scene_flow_metrics`), ``epe_static`` and ``epe_moving`` (the mean EPE on the
+        largest object's points and on the others'). Points with a negative true label
+        are not scored. ``capture_times``: whether ``fit`` was given the points' capture
+        times.
 
     Examples
     --------

@@ -35,6 +35,14 @@ DATASET is one of
     motions by ICP, clusters by the --method variant). Argoverse 2 jobs are still scored
     against the ground-truth flow of sweep k. Not for correspondence files.
 
+Capture times: with --pairs sweeps, an Argoverse 2 job hands the capture time of every
+point (the sweep files' offset_ns, seconds after each sweep's timestamp) and the time
+between the two sweeps to SweepRegistration, which moves each moving object's points back
+to where the object was at its sweep's timestamp inside the ICP (deskewing: the two LiDAR
+heads see a car about 50 ms apart, two copies of it within one sweep). Sweeps whose
+offsets are all zero are registered without; --no-capture-times turns it off. The
+summary's capture_times column says which jobs had them. Frames carry no times.
+
 Written into --out: jobs/<job>.npz per job (labels, rotations, translations, sigmas,
 flow, moving, meta), each whole or not at all; summary.parquet and summary.csv (one row
 per job: sizes, clusters, timings, status, and the scores when the truth is known); and
@@ -57,6 +65,8 @@ examples:
   mmreg run frames/ --out result --method robust --tau 1.5
   mmreg run lidar_frames/ --pairs sweeps --out result
   mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs sweeps
+  mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs sweeps \
+      --no-capture-times --out without-times
   mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val
 """
 
@@ -113,6 +123,13 @@ def add_arguments(parser):
         "--keep-ground", action="store_true", help="Argoverse 2: keep the ground points"
     )
     parser.add_argument(
+        "--no-capture-times",
+        dest="capture_times",
+        action="store_false",
+        help="Argoverse 2 with --pairs sweeps: do not deskew the moving objects by the "
+        "points' capture times (offset_ns); register as if each sweep were taken at once",
+    )
+    parser.add_argument(
         "--overwrite",
         action="store_true",
         help="run every job again, replacing an earlier run at --out (never other files)",
@@ -129,6 +146,7 @@ def _configuration(args):
         "layout": args.layout,
         "pairs": args.pairs,
         "drop_ground": not args.keep_ground,
+        "capture_times": args.capture_times,
         "method": args.method,
         "tau": args.tau,
         "max_iter": args.max_iter,
@@ -206,7 +224,11 @@ def run(args):
     resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
     with reading(args.dataset):
         jobs = dataset_jobs(
-            args.dataset, layout=args.layout, drop_ground=not args.keep_ground, pairs=args.pairs
+            args.dataset,
+            layout=args.layout,
+            drop_ground=not args.keep_ground,
+            pairs=args.pairs,
+            capture_times=args.capture_times,
         )
     try:
         if args.overwrite and (out / "jobs").is_dir():
@@ -235,7 +257,8 @@ def run(args):
             + (f" ({resumed:,} from an earlier run)" if resuming and resumed else "")
             + f", {len(failed):,} failed, {elapsed:.1f} s"
         )
-        scores = [c for c in ("iou", "moving_found", "epe3d") if c in summary]
+        scores = ("iou", "moving_found", "epe3d", "epe_moving", "epe_static")
+        scores = [c for c in scores if c in summary]
         if scores:
             means = summary[scores].mean(numeric_only=True)
             print("mean " + ", ".join(f"{name} {value:.3f}" for name, value in means.items()))

@@ -45,6 +45,20 @@ point-to-plane ICP (SweepRegistration); with a cloud INPUT alone the two raw swe
 registered (ego motion, then every island of INPUT aligned to S). --target keeps its
 meaning: one b-point per a-point, in the same order.
 
+Capture times (with --sweep): a spinning LiDAR takes a sweep's points over its whole
+period, so a moving object is where it was when each point was taken (Argoverse 2's two
+heads see a car about 50 ms apart: two copies of it in one sweep). --times T gives the
+capture time of every point of INPUT (every row of correspondences), --sweep-times TS
+that of every point of S, each in seconds after its own sweep's reference time (the time
+its static world is compensated to; Argoverse 2: offset_ns * 1e-9), and --interval the
+seconds between the two reference times (about 0.1 at 10 Hz). The three go together; T
+and TS are an (n,) .npy or one number per line (.csv/.txt, an optional header), one per
+point in the points' order, finite, and within 10 times --interval of zero (seconds, not
+nanoseconds or absolute timestamps). With them the moving clusters are deskewed inside
+the ICP on S (SweepRegistration); the static world and the scene flow's convention (each
+point as captured, moved by its object's motion between the reference times) are as
+without.
+
 --init gives the initial clusters: "euclidean" (Euclidean clustering into --clusters
 clusters, the default), "dbscan", a file of labels (.npy, .csv or .txt: one integer per
 correspondence, negative for none) or a masks file (.npz with arrays "masks", an
@@ -79,7 +93,12 @@ examples:
   mmreg register frame0.ply --flow flow.npy --tau 1.0 -v
   mmreg register sweep0.ply --sweep sweep1.ply --tau 5
   mmreg register sweep0.ply --flow flow.npy --sweep sweep1.ply --tau 5
+  mmreg register sweep0.ply --sweep sweep1.ply --times t0.npy --sweep-times t1.npy \
+      --interval 0.1 --tau 5
 """
+# Capture times beyond this many --interval from zero are not seconds after the sweep's
+# reference time (nanoseconds, or absolute timestamps): a sweep lasts about one interval.
+MAX_TIMES_PER_INTERVAL = 10.0
 
 
 def _positive_float(text):
@@ -166,6 +185,26 @@ def add_arguments(parser):
         help="the second sweep as its own points (.ply/.pcd/.xyz or (m, 3) .npy; any size, "
         "any order): refines the motions on it, or, with a cloud INPUT alone, registers the "
         "two raw sweeps",
+    )
+    timing = parser.add_argument_group(
+        "capture times", "with --sweep, all three together (see above): deskew moving objects"
+    )
+    timing.add_argument(
+        "--times",
+        metavar="T",
+        help="capture time of every point of INPUT, in seconds after its sweep's reference "
+        "time: (n,) .npy or one column .csv/.txt",
+    )
+    timing.add_argument(
+        "--sweep-times",
+        metavar="TS",
+        help="capture time of every point of --sweep, in seconds after its reference time",
+    )
+    timing.add_argument(
+        "--interval",
+        type=_positive_float,
+        metavar="SECONDS",
+        help="seconds between the two sweeps' reference times (e.g. 0.1 at 10 Hz)",
     )
     parser.add_argument(
         "--init",
@@ -354,7 +393,63 @@ def read_sweep(args):
         return mmio.read_point_cloud(sweep)
 
 
-def _fit(X, init, args, steps, sweep=None):
+_TIME_OPTIONS = (("times", "--times"), ("sweep_times", "--sweep-times"), ("interval", "--interval"))
+
+
+def check_time_options(args):
+    """The capture-time options come all three, and with --sweep; a CLIError otherwise."""
+    given = [flag for name, flag in _TIME_OPTIONS if getattr(args, name, None) is not None]
+    if not given:
+        return
+    if getattr(args, "sweep", None) is None:
+        raise CLIError(
+            f"{', '.join(given)}: capture times deskew the moving objects in the ICP on the "
+            "second sweep; give it with --sweep"
+        )
+    missing = [flag for name, flag in _TIME_OPTIONS if getattr(args, name, None) is None]
+    if missing:
+        raise CLIError(
+            "--times, --sweep-times and --interval go together (the capture time of every "
+            "point of both sweeps and the seconds between them); missing " + " and ".join(missing)
+        )
+
+
+def _read_times(path, n, what, interval):
+    import numpy as np
+
+    from mmreg import io as mmio
+
+    with reading(path):
+        times = mmio.read_times(path)
+    if len(times) != n:
+        raise CLIError(f"{path}: {len(times):,} capture times for the {n:,} points of {what}")
+    largest = float(np.max(np.abs(times)))
+    if largest > MAX_TIMES_PER_INTERVAL * interval:
+        raise CLIError(
+            f"{path}: capture times up to {largest:g} s from the reference time, more than "
+            f"{MAX_TIMES_PER_INTERVAL:g} times --interval {interval:g} s; they must be "
+            "seconds after the sweep's reference time (not nanoseconds, not absolute "
+            "timestamps)"
+        )
+    return times
+
+
+def read_capture_times(args, n, m):
+    """``fit``'s ``times``, ``sweep_times`` and ``interval`` from the options, or ``{}``.
+
+    ``n``: points (rows) of INPUT; ``m``: points of the second sweep.
+    """
+    check_time_options(args)
+    if getattr(args, "times", None) is None:
+        return {}
+    return {
+        "times": _read_times(args.times, n, args.input, args.interval),
+        "sweep_times": _read_times(args.sweep_times, m, args.sweep, args.interval),
+        "interval": args.interval,
+    }
+
+
+def _fit(X, init, args, steps, sweep=None, timing=None):
     from mmreg import MultiModelRegistration, SweepRegistration
     from mmreg.init import initial_labels
 
@@ -380,8 +475,10 @@ def _fit(X, init, args, steps, sweep=None):
     )
     if sweep is not None:
         estimator = SweepRegistration(estimator, random_state=args.seed)
-    with steps.step("EM" if sweep is None else "EM and ICP on --sweep"), reported_warnings():
-        estimator.fit(X, **({} if sweep is None else {"sweep": sweep}))
+    params = {} if sweep is None else {"sweep": sweep} | (timing or {})
+    name = "EM" if sweep is None else "EM and ICP on --sweep" + (" (deskewed)" if timing else "")
+    with steps.step(name), reported_warnings():
+        estimator.fit(X, **params)
     if voxel_size is not None and X.shape[1] == 6:
         # The initial clusters of the fit (a wrapped estimator's, with --sweep).
         fitted = getattr(estimator, "estimator_", estimator)
@@ -411,7 +508,8 @@ def register(
     """
     start = time.perf_counter()
     sweep = read_sweep(args)
-    estimator, n_initial = _fit(X, init, args, steps, sweep)
+    timing = read_capture_times(args, len(X), None if sweep is None else len(sweep))
+    estimator, n_initial = _fit(X, init, args, steps, sweep, timing)
     elapsed = time.perf_counter() - start
     if sweep is not None:  # what is written: the first sweep and where its points move
         import numpy as np
@@ -449,6 +547,9 @@ def register(
             "target": getattr(args, "target", None),
             "flow": getattr(args, "flow", None),
             "sweep": getattr(args, "sweep", None),
+            "times": getattr(args, "times", None),
+            "sweep_times": getattr(args, "sweep_times", None),
+            "interval": getattr(args, "interval", None),
             "init": str(args.init),
             "initial_clusters": n_initial,
             "estimator": _params(estimator) | {"init": str(args.init)},
@@ -498,7 +599,7 @@ TABLE = [
 def default_out(args):
     """``<INPUT's name>-mmreg-<8 hex digits>``: a name no other input (or partner) shares."""
     paths = [args.input, getattr(args, "target", None), getattr(args, "flow", None)]
-    paths.append(getattr(args, "sweep", None))
+    paths += [getattr(args, name, None) for name in ("sweep", "times", "sweep_times")]
     key = "\0".join(str(Path(p).resolve()) for p in paths if p is not None)
     digest = hashlib.sha256(key.encode("utf-8", "surrogateescape")).hexdigest()[:8]
     return f"{Path(args.input).stem}-mmreg-{digest}"
@@ -508,6 +609,7 @@ def run(args):
     if args.out is None:
         args.out = default_out(args)
     check_out(args.out, overwrite=args.overwrite)  # before any work
+    check_time_options(args)
     if args.paper and getattr(args, "voxel_size", None) not in (None, "auto"):
         raise CLIError("--voxel-size samples the default variant's fit; drop --paper")
     with Steps(5, quiet=args.quiet, verbose=args.verbose) as steps:
