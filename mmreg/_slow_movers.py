@@ -65,6 +65,7 @@ _MAX_RESTING = 0.5
 # Members: points both motions explain join where half of their nearest neighbours
 # have, in at most this many rounds.
 _NEIGHBOURS = 8
+_JOIN = 0.5
 _GROWTH_STEPS = 10
 
 
@@ -263,7 +264,7 @@ def _members(a, free, unexplained, seeds, accepted, R, t, target, cell, min_size
         same = k[hood] == k[:, None]
         for _ in range(_GROWTH_STEPS):
             votes = (member[hood] & same).sum(axis=1)
-            grown = member | (either & (2 * votes >= _NEIGHBOURS))
+            grown = member | (either & (votes >= _JOIN * _NEIGHBOURS))
             if np.array_equal(grown, member):
                 break
             member = grown
