@@ -48,7 +48,7 @@ from mmreg._icp import multi_body_icp, subsample_groups
 from mmreg._islands import voxel_islands
 from mmreg._motion import _group_median
 
-__all__ = ["slow_movers"]
+__all__ = ["beyond_spacing", "slow_movers"]
 
 # A point is unexplained beyond this many spacings from the second sweep.
 _UNEXPLAINED = 2.0
@@ -80,6 +80,39 @@ def _spacing_ratio(points, tree, sweep):
     spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
     spacing = np.maximum(spacing, np.finfo(float).tiny)
     return distance / spacing, nearest, spacing
+
+
+def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep):
+    """Whether each group's motion moves its points more than 2 spacings from the ego's.
+
+    The displacement (median over the group's points) between where its own motion and
+    the ego motion put them, against the second sweep's spacing (median) where its own
+    motion puts them: a far, sparse piece that the ICP shifts by less than its
+    sampling spacing has not moved.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+    groups : ndarray of shape (n,)
+        Group of every point in ``0..n_groups-1``.
+    n_groups : int
+    motions : tuple of ndarray
+        ``(rotations, translations)``, one per group.
+    ego : tuple of ndarray
+        ``(R, t)`` of the ego motion.
+    tree : cKDTree of ``sweep``
+    sweep : ndarray of shape (m, 3)
+
+    Returns
+    -------
+    beyond : ndarray of bool, shape (n_groups,)
+    """
+    rotations, translations = motions
+    moved = np.einsum("nij,nj->ni", rotations[groups], points) + translations[groups]
+    _, _, spacing = _spacing_ratio(moved, tree, sweep)
+    resting = points @ ego[0].T + ego[1]
+    departure = _group_median(np.linalg.norm(moved - resting, axis=1), groups, n_groups)
+    return departure > _MIN_SPACINGS * _group_median(spacing, groups, n_groups)
 
 
 def _unexplained(points, tree, sweep, normals):

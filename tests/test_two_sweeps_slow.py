@@ -170,3 +170,20 @@ def test_a_piece_that_slides_onto_points_at_rest_stays_static(monkeypatch):
     monkeypatch.setattr(slow, "_MAX_RESTING", 1.01)  # without the landing test
     labels, _, _ = _slow_movers(a, sweep)
     assert labels.max() == 0
+
+
+@pytest.mark.parametrize(("spacings", "beyond"), [(0.5, False), (1.5, False), (3.0, True)])
+def test_a_shift_within_the_sampling_spacing_is_no_motion(spacings, beyond):
+    # A sparse block far away (0.2 m apart), shifted by a share of its spacing.
+    h = 0.2
+    block = np.vstack(
+        [_plane((0, 2), (0, 2), 0.0, h), _plane((0, 2), (0, 2), 0.0, h)[:, [0, 2, 1]]]
+    )
+    sweep = block + [0.0, 0.05, 0.05]  # another sampling, at rest
+    shift = np.array([0.0, 0.0, spacings * h])
+    tree = cKDTree(sweep)
+    ego = (np.eye(3), np.zeros(3))
+    motions = (np.eye(3)[None], shift[None])
+    groups = np.zeros(len(block), dtype=np.intp)
+    found = slow.beyond_spacing(block, groups, 1, motions, ego, tree, sweep)
+    assert found.tolist() == [beyond]
