@@ -38,7 +38,7 @@ def _static_called_moving(true, labels, moving):
     return str(count)
 
 
-def _row(scene, mode, flow, labels, seconds, moving=None):
+def _row(scene, mode, flow, labels, seconds, moving_clusters=None):
     true = scene.labels
     error = np.linalg.norm(flow - scene.flow, axis=1)
     objects = [k for k in np.unique(true[true >= 1]) if (true == k).sum() >= MIN_OBJECT_POINTS]
@@ -55,7 +55,7 @@ def _row(scene, mode, flow, labels, seconds, moving=None):
         "EPE static (m)": float(error[true == 0].mean()),
         "three-way EPE": three,
         "seconds": seconds,
-        "static called moving": _static_called_moving(true, labels, moving),
+        "static called moving": _static_called_moving(true, labels, moving_clusters),
     }
 
 
