@@ -27,6 +27,7 @@ from mmreg._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg._island_motions import choose_island_motions, translation_starts
 from mmreg._islands import voxel_islands
 from mmreg._motion import moving_clusters, static_cluster
+from mmreg._slow_movers import beyond_spacing, slow_movers
 from mmreg._validation import check_coordinate_range
 
 __all__ = ["SweepRegistration"]
@@ -140,7 +141,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       towards the second sweep's points within ``max_displacement`` (as ICP-Flow does).
       An island keeps the ego motion unless its best alternative wins by a clear margin
       (robust point-to-plane likelihood gain over a BIC price, a fifth more of its points
-      explained, and mmreg's moving rule; :mod:`mmreg._island_motions`). The islands'
+      explained, and mmreg's moving rule; :mod:`mmreg._island_motions`). Small objects
+      that move a few sampling spacings (a pedestrian beside a wall) stay within that
+      margin; they are found point by point among the islands that keep the ego
+      motion (the points the ego motion leaves far from the second sweep, aligned by
+      ICP; kept when they land where the first sweep had nothing;
+      :mod:`mmreg._slow_movers`) and become islands of their own. The islands'
       motions become putative correspondences for ``estimator``; the static world keeps
       the ego motion and the other clusters are refined as above. This repeats while the
       labels change (at most ``max_rounds`` times): a multi-body ICP around the EM.
@@ -634,7 +640,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         )
         motions = (result.rotations, result.translations)
         inside = np.flatnonzero(islands >= 0)
-        resting = a[inside] @ ego[0].T + ego[1]
+        resting = cKDTree(a[inside] @ ego[0].T + ego[1])
         moving, pick = choose_island_motions(
             a[chosen],
             islands[chosen],
@@ -644,13 +650,43 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             valid.reshape(n_islands, n_starts),
             sigma,
             (sweep, tree, normals),
-            (cKDTree(resting), islands[inside], 0.5 * self.island_radius),
+            (resting, islands[inside], 0.5 * self.island_radius),
             max_distance=self.max_distance,
         )
         rotations = np.broadcast_to(ego[0], (n_islands, 3, 3)).copy()
         translations = np.broadcast_to(ego[1], (n_islands, 3)).copy()
         rotations[moving] = result.rotations[pick[moving]]
         translations[moving] = result.translations[pick[moving]]
+        # A far, sparse island that its motion shifts by less than two of the second
+        # sweep's sampling spacings has not moved (its better fit is another sampling).
+        if moving.any():
+            moving &= beyond_spacing(
+                a[chosen], islands[chosen], n_islands, (rotations, translations), ego, tree, sweep
+            )
+            rotations[~moving], translations[~moving] = ego
+        # Objects that move by a few sampling spacings stay within the ego motion's
+        # band and often share an island with a static structure: found point by point
+        # among the points no moving island holds, they become islands of their own.
+        slow, slow_rotations, slow_translations = slow_movers(
+            a,
+            (islands < 0) | ~moving[np.maximum(islands, 0)],
+            ego,
+            sigma,
+            (sweep, tree, normals),
+            resting,
+            cell=0.5 * self.island_radius,
+            min_size=self.min_island_size,
+            max_points=2 * _HYPOTHESIS_POINTS,
+            max_distance=self.max_distance,
+            max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
+            tol=_TOL * self.max_distance,
+            random_state=rng,
+        )
+        if len(slow_rotations):
+            islands = np.where(slow >= 0, n_islands + slow, islands)
+            rotations = np.concatenate([rotations, slow_rotations])
+            translations = np.concatenate([translations, slow_translations])
+            moving = np.concatenate([moving, np.ones(len(slow_rotations), dtype=bool)])
         return islands, rotations, translations, moving
 
     def _raw(self, a, context):
