@@ -1,5 +1,7 @@
 """SweepRegistration and the multi-body ICP on generated pairs of sweeps."""
 
+import json
+
 import numpy as np
 import pytest
 from sklearn.base import clone
@@ -126,7 +128,7 @@ def test_two_raw_sweeps():
     assert est.moving_.sum() == 2
 
 
-def test_raw_default_estimator_starts_from_the_islands_and_a_given_one_as_given():
+def test_raw_sweeps_start_from_the_islands_unless_the_estimator_s_init_is_asked_for():
     a, b, labels, rotations, translations, sweep = make_pair()
     raw = SweepRegistration(max_distance=1.5, island_radius=1.0, min_island_size=20)
     raw = raw.set_params(random_state=0).fit(a, sweep=sweep)
@@ -134,8 +136,16 @@ def test_raw_default_estimator_starts_from_the_islands_and_a_given_one_as_given(
     assert isinstance(init, np.ndarray) and init.shape == (len(a),)
     assert raw.estimator is None  # the parameter itself is left alone
     assert _motion_error(raw, a, labels, rotations, translations) < EXACT
+    # A given estimator starts from the islands too (its clone's init), and from its
+    # own init with raw_init="estimator".
     given = _estimator(island_radius=1.0, min_island_size=20).fit(a, sweep=sweep)
-    assert given.estimator_.get_params()["init"] == "euclidean"
+    assert isinstance(given.estimator_.get_params()["init"], np.ndarray)
+    assert given.estimator.get_params()["init"] == "euclidean"
+    assert _motion_error(given, a, labels, rotations, translations) < EXACT
+    own = _estimator(island_radius=1.0, min_island_size=20, raw_init="estimator")
+    own = own.fit(a, sweep=sweep)
+    assert own.estimator_.get_params()["init"] == "euclidean"
+    assert _motion_error(own, a, labels, rotations, translations) < EXACT
 
 
 @pytest.mark.parametrize(
@@ -197,6 +207,15 @@ def test_cli_registers_two_raw_sweeps_and_refines_a_flow(tmp_path):
         assert picture.stat().st_size > 0
         np.save(tmp_path / "truth.npy", labels)
         assert main(["evaluate", str(tmp_path / out), str(tmp_path / "truth.npy")]) == 0
+    # Raw sweeps start from their islands, as SweepRegistration() does, unless --init
+    # names a clustering; correspondences from the Euclidean clustering.
+    assert json.loads((tmp_path / "raw" / "run.json").read_text())["init"] == "islands"
+    assert json.loads((tmp_path / "ref" / "run.json").read_text())["init"] == "euclidean"
+    euclidean = [*raw, "--init", "euclidean", "--out", str(tmp_path / "euc"), *common]
+    assert main(euclidean) == 0
+    assert json.loads((tmp_path / "euc" / "run.json").read_text())["init"] == "euclidean"
+    found = np.load(tmp_path / "euc" / "labels.npy")
+    assert len(np.unique(found[found >= 0])) == 3
 
 
 def test_cli_target_of_another_size_points_to_sweep(tmp_path, capsys):

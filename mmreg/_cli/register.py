@@ -60,9 +60,11 @@ point as captured, moved by its object's motion between the reference times) are
 without.
 
 --init gives the initial clusters: "euclidean" (Euclidean clustering into --clusters
-clusters, the default), "dbscan", a file of labels (.npy, .csv or .txt: one integer per
-correspondence, negative for none) or a masks file (.npz with arrays "masks", an
-(m, H, W) boolean stack or an H x W integer label image, negative for none, e.g.
+clusters, the default; with two raw sweeps the default is SweepRegistration's own start,
+the sweeps' islands, which "euclidean" or "dbscan" replaces), "dbscan", a file of labels
+(.npy, .csv or .txt: one integer per correspondence, negative for none) or a masks file
+(.npz with arrays "masks", an (m, H, W) boolean stack or an H x W integer label image,
+negative for none, e.g.
 SegmentAnything's masks of the first image, and "pixels", the (n, 2) integer (column, row)
 of each a-point in that image).
 
@@ -208,9 +210,10 @@ def add_arguments(parser):
     )
     parser.add_argument(
         "--init",
-        default="euclidean",
+        default=None,
         metavar="INIT",
-        help="euclidean, dbscan, LABELS (.npy/.csv/.txt) or MASKS.npz (masks + pixels)",
+        help="euclidean (default; two raw sweeps: their islands), dbscan, LABELS "
+        "(.npy/.csv/.txt) or MASKS.npz (masks + pixels)",
     )
     parser.add_argument(
         "--clusters",
@@ -360,13 +363,21 @@ def read_masks(path, n):
         return PrecomputedMasks(masks, pixels)
 
 
+def init_name(args, X):
+    """What ``--init`` named, or the default it stands for (two raw sweeps, ``X`` of
+    shape (n, 3): their islands)."""
+    if args.init is not None:
+        return str(args.init)
+    return "islands" if X.shape[1] == 3 else "euclidean"
+
+
 def make_init(args, n):
     """The ``init`` of the estimator: an initialiser or an array of labels."""
     from mmreg import io as mmio
     from mmreg.init import DBSCANClustering, EuclideanClustering
 
     n_jobs = getattr(args, "n_jobs", None)
-    if args.init == "euclidean":
+    if args.init in (None, "euclidean"):
         return EuclideanClustering(n_clusters=args.clusters, n_jobs=n_jobs)
     if args.init == "dbscan":
         return DBSCANClustering(eps=getattr(args, "eps", None), n_jobs=n_jobs)
@@ -474,7 +485,9 @@ def _fit(X, init, args, steps, sweep=None, timing=None):
         verbose=args.verbose,
     )
     if sweep is not None:
-        estimator = SweepRegistration(estimator, random_state=args.seed)
+        # Two raw sweeps start from their islands unless --init names a clustering.
+        raw_init = "islands" if args.init is None else "estimator"
+        estimator = SweepRegistration(estimator, raw_init=raw_init, random_state=args.seed)
     params = {} if sweep is None else {"sweep": sweep} | (timing or {})
     name = "EM" if sweep is None else "EM and ICP on --sweep" + (" (deskewed)" if timing else "")
     with steps.step(name), reported_warnings():
@@ -507,6 +520,7 @@ def register(
     Returns ``(estimator, summary, fit_seconds, n_initial_clusters)``.
     """
     start = time.perf_counter()
+    init_used = init_name(args, X)
     sweep = read_sweep(args)
     timing = read_capture_times(args, len(X), None if sweep is None else len(sweep))
     estimator, n_initial = _fit(X, init, args, steps, sweep, timing)
@@ -550,9 +564,9 @@ def register(
             "times": getattr(args, "times", None),
             "sweep_times": getattr(args, "sweep_times", None),
             "interval": getattr(args, "interval", None),
-            "init": str(args.init),
+            "init": init_used,
             "initial_clusters": n_initial,
-            "estimator": _params(estimator) | {"init": str(args.init)},
+            "estimator": _params(estimator) | {"init": init_used},
             "n_jobs": getattr(args, "n_jobs", None),
             "n_correspondences": len(X),
             "n_clusters": estimator.n_clusters_,

@@ -155,11 +155,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     ----------
     estimator : estimator or None, default=None
         The multi-model estimator (fitted on clones). None:
-        ``MultiModelRegistration(variant="sweep", tau=5.0)``, the variant for real LiDAR;
-        in raw mode it starts from the islands (the first round) or the last round's
-        clusters, whose motions made its correspondences, instead of a Euclidean
-        clustering of the points (the same clusters on the shared Argoverse 2 pairs, in
-        half the time).
+        ``MultiModelRegistration(variant="sweep", tau=5.0)``, the variant for real LiDAR.
     refine : {"moving", "all"}, default="moving"
         Which clusters' motions are refined in refinement mode. ``"moving"`` keeps the
         static world's motion from the correspondences: a network's flow on the static
@@ -182,6 +178,13 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sweeps (3 m: 30 m/s at 10 Hz).
     max_rounds : int, default=2
         Raw mode: most rounds of estimator and ICP.
+    raw_init : {"islands", "estimator"}, default="islands"
+        Raw mode: the estimator's initial clusters. ``"islands"``: the islands (the first
+        round, slow movers included) or the last round's clusters, whose motions made
+        its correspondences (set as the ``init`` of the estimator's clone, when it has
+        one); the same clusters as a Euclidean clustering on the shared Argoverse 2
+        pairs in half the time, and the only way for the slow movers, which share
+        islands with the static world, to start apart. ``"estimator"``: its own ``init``.
     random_state : int, RandomState instance or None, default=None
         Seeds the subsampling and an ``estimator`` whose ``random_state`` is None.
 
@@ -295,6 +298,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         "min_island_size": [Interval(Integral, 1, None, closed="left")],
         "max_displacement": [Interval(Real, 0, None, closed="neither")],
         "max_rounds": [Interval(Integral, 1, None, closed="left")],
+        "raw_init": [StrOptions({"islands", "estimator"})],
         "random_state": ["random_state"],
     }
 
@@ -310,6 +314,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         min_island_size=30,
         max_displacement=3.0,
         max_rounds=2,
+        raw_init="islands",
         random_state=None,
     ):
         self.estimator = estimator
@@ -321,6 +326,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.min_island_size = min_island_size
         self.max_displacement = max_displacement
         self.max_rounds = max_rounds
+        self.raw_init = raw_init
         self.random_state = random_state
 
     def _make_estimator(self, random_state, init=None):
@@ -328,11 +334,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             from mmreg.estimators._multi_model_registration import MultiModelRegistration
 
             estimator = MultiModelRegistration(variant="sweep", tau=5.0)
-            if init is not None:
-                estimator.set_params(init=init)
         else:
             estimator = clone(self.estimator)
         params = estimator.get_params(deep=False)
+        if init is not None and self.raw_init == "islands" and "init" in params:
+            estimator.set_params(init=init)
         if "random_state" in params and params["random_state"] is None:
             estimator.set_params(random_state=random_state.randint(2**31 - 1))
         return estimator
