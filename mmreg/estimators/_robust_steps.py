@@ -1078,16 +1078,40 @@ def drop_small_clusters(labels, counts, min_cluster_size):
     return position[labels], np.flatnonzero(kept)
 
 
-def _best_hypothesis(sq, grid, allowed, d, chi2_limit, log_g, n_total, log_outlier):
+# Scales below the grid that a proposal may fall back on (a factor 2 each).
+_FINER_SCALES = 3
+
+
+def _best_hypothesis(
+    sq, grid, allowed, d, chi2_limit, log_g, n_total, log_outlier, meaningful=None, finer=()
+):
     """The (hypothesis, noise scale) whose inliers gain most over the outlier component.
 
     ``sq`` (h, m) are squared residuals normalised by each correspondence's ``g_i``; the
     gain of scale ``s`` is ``sum_inliers [log N(r_i; 0, (s g_i)^2 I) + log(k / n) -
     log_outlier]`` over the ``k`` inliers ``sq <= chi2_limit s^2``, and ``allowed`` (h, S)
-    says which scales of ``grid`` each hypothesis may take. Returns the hypothesis' index
-    and its scale.
+    says which scales of ``grid`` each hypothesis may take. ``meaningful(counts, s)``,
+    if given, says which counts of inliers at scale ``s`` are not to be expected by
+    chance. When the best of all is not one of them, the best among those wins, on the
+    grid and on the ``finer`` scales below it: a scale too wide (the clusters' smallest
+    is inflated when the initial clusters mix motions) gathers other motions' points as
+    inliers, as any motion would. Returns the hypothesis' index and its scale.
     """
-    best_gain, best, best_scale = -np.inf, 0, grid[0]
+    best = _most_gain(sq, grid, allowed, d, chi2_limit, log_g, n_total, log_outlier)
+    if meaningful is None or best[0] == -np.inf or meaningful(np.array([best[3]]), best[2])[0]:
+        return best[1], best[2]
+    finer = np.asarray(finer, dtype=float)
+    wide = np.concatenate([finer, grid])
+    wide_allowed = np.hstack([np.ones((len(sq), len(finer)), dtype=bool), allowed])
+    found = _most_gain(
+        sq, wide, wide_allowed, d, chi2_limit, log_g, n_total, log_outlier, meaningful
+    )
+    return (found[1], found[2]) if found[0] > -np.inf else (best[1], best[2])
+
+
+def _most_gain(sq, grid, allowed, d, chi2_limit, log_g, n_total, log_outlier, meaningful=None):
+    """``(gain, hypothesis, scale, inliers)`` of :func:`_best_hypothesis`."""
+    best_gain, best, best_scale, best_count = -np.inf, 0, grid[0], 0
     for k, sigma in enumerate(grid):
         if not allowed[:, k].any():
             continue
@@ -1099,11 +1123,14 @@ def _best_hypothesis(sq, grid, allowed, d, chi2_limit, log_g, n_total, log_outli
             - count * d * (np.log(sigma) + 0.5 * _LOG_2PI)
             + count * (np.log(np.maximum(count, 1) / n_total) - log_outlier)
         )
-        gain = np.where(allowed[:, k] & (count > 0), gain, -np.inf)
+        keep = allowed[:, k] & (count > 0)
+        if meaningful is not None:
+            keep &= meaningful(count, sigma)
+        gain = np.where(keep, gain, -np.inf)
         h = int(np.argmax(gain))
         if gain[h] > best_gain:
-            best_gain, best, best_scale = gain[h], h, sigma
-    return best, float(best_scale)
+            best_gain, best, best_scale, best_count = gain[h], h, sigma, count[h]
+    return best_gain, best, float(best_scale), int(best_count)
 
 
 def _shares_a_motion(models, proposal, d):
@@ -1220,6 +1247,14 @@ def propose_clusters(
         else:
             base = pa if reference is None else pa @ reference[0].T + reference[1]
             motion = np.median(np.linalg.norm(moved - base[None], axis=2), axis=1)
+            # The a-contrario test below, with the members' median noise scale.
+            spread, m = float(np.median(g)), len(members)
+
+            def meaningful(counts, sigma, spread=spread, m=m):
+                reach = np.sqrt(chi2_limit) * sigma * spread
+                chance = min(1.0, unit_ball * reach**d * np.exp(log_volume_density))
+                return n_tests * binom.sf(counts - size - 1, m - size, chance) < 1.0
+
             best, sigma = _best_hypothesis(
                 sq,
                 grid,
@@ -1229,6 +1264,8 @@ def propose_clusters(
                 np.log(g),
                 n_total,
                 log_outlier,
+                meaningful,
+                finer=scale * 2.0 ** -np.arange(_FINER_SCALES, 0, -1),
             )
         limit = chi2_limit * sigma**2
         inliers = np.flatnonzero(sq[best] <= limit)
