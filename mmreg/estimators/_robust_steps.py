@@ -1192,16 +1192,19 @@ def propose_clusters(
     The (hypothesis, scale) whose inliers (residual within the ``confidence`` quantile
     of ``(sigma g_i)^2 chi2_d``) gain most log-likelihood over the outlier component
     wins (the noise scale is searched, as MAGSAC marginalises it) and is refitted on
-    them. It becomes a cluster only if its inliers' log-likelihood under it beats that
-    under the outlier density by more than the BIC price of a motion and a noise scale,
-    and if so many inliers are not to be expected by chance: with ``p`` the share of the
-    scene's volume ``V`` within the inlier radius of a point's predicted position, the
-    number of false alarms ``N_tests P(Binomial(m - 3, p) >= k - 3)`` of ``k`` inliers
-    among ``m`` must stay below 1, ``N_tests`` counting every hypothesis drawn (the
-    a-contrario test of AC-RANSAC, Moisan and Stival 2004). Wrong correspondences that
-    agree on no motion never form a cluster. Nor does a motion that one of the
-    ``models`` (the current clusters) already has, by the merge test of
-    :func:`merge_adjacent`: a proposal must bring a new motion. Points that move like a
+    them; if so many inliers would be expected by chance (below), the best one that
+    passes that test wins instead, on three finer scales too (as AC-RANSAC picks the
+    most meaningful threshold). It becomes a cluster only if its inliers' log-likelihood
+    under it beats that under the outlier density by more than the BIC price of a motion
+    and a noise scale, and if so many inliers are not to be expected by chance: with
+    ``p`` the share of the scene's volume ``V`` within the inlier radius of a point's
+    predicted position, the number of false alarms
+    ``N_tests P(Binomial(m - 3, p) >= k - 3)`` of ``k`` inliers among ``m`` must stay
+    below 1, ``N_tests`` counting every hypothesis drawn (the a-contrario test of
+    AC-RANSAC, Moisan and Stival 2004). Wrong correspondences that agree on no motion
+    never form a cluster. Nor does a motion that one of the ``models`` (the current
+    clusters) already has, by the merge test of :func:`merge_adjacent`: a proposal must
+    bring a new motion. Points that move like a
     cluster beyond the gate are flow that bled across an object's silhouette far more
     often than another object: separate objects that move alike come from the initial
     clusters, as eq. (7) intends.
