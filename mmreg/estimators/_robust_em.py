@@ -428,7 +428,11 @@ def robust_multi_model_em(
             if static >= 0:
                 reference = (models.rotations[static], models.translations[static])
             own_scales = sweep and static >= 0
-            # 9. New clusters from the unexplained correspondences.
+            # 9. New clusters from the unexplained correspondences. Their hypotheses turn
+            # like the static world, unless the E-step took most of its members from
+            # it: then its motion was the mean of several (initial clusters that mix
+            # motions, fitted by least squares) and would turn every hypothesis wrong.
+            anchor = static if _holds_its_members(static, own, new) else -1
             found = []
             if run["proposals"]:
                 found = propose_clusters(
@@ -448,8 +452,8 @@ def robust_multi_model_em(
                     n_hypotheses=n_hypotheses,
                     confidence=confidence,
                     reference=(
-                        (models.rotations[static], models.translations[static])
-                        if static >= 0
+                        (models.rotations[anchor], models.translations[anchor])
+                        if anchor >= 0
                         else None
                     ),
                     per_cluster=sweep,
@@ -985,6 +989,14 @@ def _unexplained(a, b, labels, static, models, noise_scale, confidence):
     limit = chi2.ppf(confidence, a.shape[1]) * models.sigmas[static] ** 2
     unexplained[rows[sq > limit]] = True
     return unexplained
+
+
+def _holds_its_members(cluster, before, after):
+    """Whether ``cluster`` (-1: none) keeps at least half of its members from the labels
+    ``before`` to ``after``."""
+    if cluster < 0:
+        return False
+    return 2 * np.count_nonzero(after == cluster) >= np.count_nonzero(before == cluster)
 
 
 def _position(kept, cluster):
