@@ -275,3 +275,42 @@ def test_merging_retests_only_merged_pairs_and_matches_retesting_all(
     root, _, n_merges = robust_steps.merge_adjacent(models, pairs, 3, 1e-9)
     np.testing.assert_array_equal(root, expected)
     assert n_merges == k - len(np.unique(expected))
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n_motions=st.integers(1, 5),
+    pieces=st.integers(1, 4),
+    static=st.booleans(),
+)
+def test_joining_moving_pieces_skips_the_neighbour_queries_only_when_no_motions_agree(
+    seed, n_motions, pieces, static
+):
+    # Pieces of a few motions, some touching and some apart: the test of every pair's
+    # motions ahead must give the roots of the full step (touching pairs, then motions).
+    rng = np.random.default_rng(seed)
+    k = n_motions * pieces
+    motion = rng.integers(n_motions, size=k)
+    shifts = rng.normal(size=(n_motions, 3)) * rng.choice([0.2, 2.0], size=(n_motions, 1))
+    labels = np.repeat(np.arange(k), 60)
+    centres = rng.normal(size=(k, 3)) * rng.choice([1.0, 10.0])
+    a = rng.normal(size=(len(labels), 3)) * 0.5 + centres[labels]
+    b = a + shifts[motion[labels]] + rng.normal(size=a.shape) * 0.02
+    models = _models(a, b, labels, k)
+    static_cluster = 0 if static else -1
+    neighbours = NeighbourTable(a)
+
+    def join(max_pairs):
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(robust_steps, "_MAX_PAIRS_TESTED_AHEAD", max_pairs)
+            return robust_steps.join_moving_pieces(
+                a, labels, models, static_cluster, 3, 1e-9, neighbours=neighbours
+            )
+
+    root, joined, n_joined = join(robust_steps._MAX_PAIRS_TESTED_AHEAD)
+    full_root, full_joined, n_full = join(-1)  # -1: never ahead, always the full step
+    np.testing.assert_array_equal(root, full_root)
+    assert n_joined == n_full
+    np.testing.assert_array_equal(joined.rotations, full_joined.rotations)
+    np.testing.assert_array_equal(joined.translations, full_joined.translations)

@@ -756,6 +756,10 @@ def join_moving_pieces(
     rows = np.flatnonzero((labels >= 0) & (labels != static))
     if len(rows) < 2:
         return root, models, 0
+    if not _some_motions_agree(models, np.unique(labels[rows]), static, tolerance):
+        # Joining needs agreeing motions and touching points: without the first, the
+        # neighbour queries of the second are not needed.
+        return root, models, 0
     pts, own = points[rows], labels[rows]
     if neighbours is None:
         spacing = cKDTree(pts).query(pts, k=2, workers=workers)[0][:, 1]
@@ -781,6 +785,22 @@ def join_moving_pieces(
     for target in np.unique(root[root != np.arange(k)]):
         _merge_into(models, target, np.flatnonzero(root == target), d, sigma_floor)
     return root, models, int(np.count_nonzero(root != np.arange(k)))
+
+
+# Above this many pairs of moving clusters, join_moving_pieces tests only touching ones.
+_MAX_PAIRS_TESTED_AHEAD = 1 << 15
+
+
+def _some_motions_agree(models, clusters, static, tolerance):
+    """Whether any two of ``clusters`` pass the motion test of :func:`join_moving_pieces`
+    (True, untested, when there are too many pairs to test them all ahead)."""
+    if len(clusters) * (len(clusters) - 1) // 2 > _MAX_PAIRS_TESTED_AHEAD:
+        return True
+    i, j = np.triu_indices(len(clusters), k=1)
+    i, j = clusters[i], clusters[j]
+    motion = np.minimum(motion_size(models, i, static), motion_size(models, j, static))
+    gap = np.maximum(motion_gap(models, i, j), motion_gap(models, j, i))
+    return bool(np.any(gap <= tolerance * motion))
 
 
 def _with(models, other):
