@@ -40,9 +40,13 @@ def reference_layers(points, labels, n_clusters, spacing, thickness, exempt):
     gridded=st.booleans(),
     exempt=st.integers(-1, 6),
     thickness=st.sampled_from([0.5, 1.5, 3.0, 6.0]),
+    every_row_labelled=st.booleans(),
 )
-def test_boundary_layers_match_the_definition(seed, n, n_clusters, gridded, exempt, thickness):
-    exempt = exempt if exempt < n_clusters else -1
+def test_boundary_layers_match_the_definition(
+    seed, n, n_clusters, gridded, exempt, thickness, every_row_labelled
+):
+    # Every row in a cluster and none exempt: the table is read in place, not copied.
+    exempt = exempt if exempt < n_clusters and not every_row_labelled else -1
     rng = np.random.default_rng(seed)
     points = rng.normal(size=(n, 3)) * rng.uniform(0.1, 5.0)
     if gridded:
@@ -52,6 +56,8 @@ def test_boundary_layers_match_the_definition(seed, n, n_clusters, gridded, exem
     # Spatially coherent clusters too, so that some are layers and some are not.
     half = points[:, 0] > np.median(points[:, 0])
     labels[half] = rng.integers(-1, n_clusters)
+    if every_row_labelled:
+        labels = np.where(labels >= 0, labels, rng.integers(0, n_clusters, size=n))
     spacing = NeighbourTable(points, k=2).distance[:, -1]
     # A table narrower than the default makes the widening path run.
     table = NeighbourTable(points, k=int(rng.integers(1, 6)))

@@ -547,6 +547,8 @@ def adjacent_pairs(points, labels, n_clusters, tau):
         i, j = np.triu_indices(n_clusters, k=1)
         return np.column_stack([i, j])
     keep = labels >= 0
+    if not keep.any():
+        return np.empty((0, 2), dtype=np.intp)
     points, labels = points[keep], labels[keep]
     d = points.shape[1]
     low, high = column_bounds(points)
@@ -571,8 +573,10 @@ def adjacent_pairs(points, labels, n_clusters, tau):
         offset += 1
     if not pairs:
         return np.empty((0, 2), dtype=np.intp)
-    pairs = np.sort(np.vstack(pairs), axis=1)
-    return np.unique(pairs, axis=0).astype(np.intp)
+    pairs = np.sort(np.vstack(pairs), axis=1).astype(np.intp)
+    # As integer codes: np.unique(axis=0) costs a hundred times a sort of them.
+    code, _ = unique_sorted(pairs[:, 0] * n_clusters + pairs[:, 1])
+    return np.column_stack(np.divmod(code, n_clusters))
 
 
 def _merge_ratio(models, pairs, d):
@@ -627,7 +631,7 @@ def merge_adjacent(models, pairs, d, sigma_floor):
             break
         pairs, ratio = pairs[good], ratio[good]
         # Mutual best partners; ties to the first pair in order.
-        order = np.lexsort((np.arange(len(ratio)), ratio))
+        order = np.argsort(ratio, kind="stable")
         pairs, ratio = pairs[order], ratio[order]
         first = np.full(k, len(ratio))
         np.minimum.at(first, pairs[:, 0], np.arange(len(ratio)))
@@ -652,12 +656,15 @@ def merge_adjacent(models, pairs, d, sigma_floor):
         changed = np.zeros(k, dtype=bool)
         changed[keep] = True
         stale = changed[pairs].any(axis=1)
-        retested = np.unique(pairs[stale & (pairs[:, 0] != pairs[:, 1])], axis=0)
-        pairs = np.vstack([pairs[~stale], retested])
+        # Pairs as integer codes: np.unique(axis=0) costs a hundred times a sort of them.
+        code = pairs[:, 0] * k + pairs[:, 1]
+        retested, _ = unique_sorted(code[stale & (pairs[:, 0] != pairs[:, 1])])
+        code = np.concatenate([code[~stale], retested])
         ratio = np.concatenate([ratio[~stale], np.full(len(retested), np.nan)])
         # Ascending pairs, as np.unique gives them: the tie-break above reads this order.
-        order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-        pairs, ratio = pairs[order], ratio[order]
+        order = np.argsort(code, kind="stable")
+        code, ratio = code[order], ratio[order]
+        pairs = np.column_stack(np.divmod(code, k))
     root = parent
     while True:
         nxt = root[root]
@@ -1017,9 +1024,14 @@ def boundary_layers(
         reach = limit[cluster]
         settled_near = np.zeros(len(pending), dtype=bool)
         reaches = np.zeros(len(pending), dtype=bool)  # the k-th neighbour within reach
+        # Every point pending (no static world exempt): the table is read in place.
+        whole = len(pending) == len(labels) and k <= neighbours.k
         for start in range(0, len(pending), _BLOCK_ROWS):
             block = slice(start, start + _BLOCK_ROWS)
-            distance, index = neighbours.nearest(pending[block], k)
+            if whole:
+                distance, index = neighbours.distance[block, :k], neighbours.index[block, :k]
+            else:
+                distance, index = neighbours.nearest(pending[block], k)
             others = counted[index]
             within = distance <= reach[block, None]
             foreign = (others >= 0) & (others != cluster[block, None]) & within
@@ -1063,10 +1075,11 @@ def scattered_clusters(labels, n_clusters, neighbours, *, exempt=-1):
     size = np.bincount(own, minlength=n_clusters)
     depth = np.minimum(neighbours.k - 1, size[own] - 1)
     stray = np.zeros(len(rows), dtype=bool)
+    whole = len(rows) == len(labels)  # nothing exempt: the table is read in place
     # In blocks: a row's neighbours' labels and their running count stay small in memory.
     for start in range(0, len(rows), _BLOCK_ROWS):
         block = slice(start, start + _BLOCK_ROWS)
-        listed = labels[neighbours.index[rows[block], 1:]]
+        listed = labels[neighbours.index[block if whole else rows[block], 1:]]
         stray[block] = stray_members(own[block], listed, depth[block])
     n_strays = np.bincount(own[stray], minlength=n_clusters)
     return np.flatnonzero(2 * n_strays > size)
@@ -1076,11 +1089,21 @@ def stray_members(own, listed, depth):
     """Rows fewer than a quarter of whose first ``depth`` listed neighbours share their
     label ``own`` (:func:`scattered_clusters`); ``listed``: the neighbours' labels,
     nearest first, the row itself left out. A row with ``depth`` 0 is no stray."""
-    mine = np.cumsum(listed == own[:, None], axis=1, dtype=np.int16)
+    same = listed == own[:, None]
+    mine = np.empty(len(own), dtype=np.intp)
+    # Rows that look at every listed neighbour count them; the rest (members of small
+    # clusters) count along the row up to their depth.
+    full = depth == listed.shape[1]
+    if full.all():
+        mine = np.count_nonzero(same, axis=1)
+    else:
+        mine[full] = np.count_nonzero(same[full], axis=1)
+        short = np.flatnonzero(~full & (depth > 0))
+        running = np.cumsum(same[short], axis=1, dtype=np.int16)
+        mine[short] = running[np.arange(len(short)), depth[short] - 1]
     stray = np.zeros(len(own), dtype=bool)
-    looked = np.flatnonzero(depth > 0)
-    reach = depth[looked]
-    stray[looked] = 4 * mine[looked, reach - 1] < reach
+    looked = depth > 0
+    stray[looked] = 4 * mine[looked] < depth[looked]
     return stray
 
 
