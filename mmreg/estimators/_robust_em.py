@@ -36,6 +36,7 @@ from scipy.stats import chi2
 from sklearn.utils import check_random_state
 
 from mmreg._gate import ClusterGate
+from mmreg._geometry import row_medians
 from mmreg._likelihood import morton_order, single_threaded_blas
 from mmreg._neighbors import NeighbourTable
 from mmreg._relabelling import rows_moved
@@ -165,7 +166,7 @@ def _sampling_spacing(points, k=6, neighbours=None, workers=1):
         distance, index = neighbours.distance, neighbours.index[:, : min(k, n)]
     else:
         distance, index = cKDTree(points).query(points, k=min(k, n), workers=workers)
-    return np.median(distance[:, 1][index], axis=1)
+    return row_medians(distance[:, 1][index])
 
 
 def reads_neighbours(skip_steps):

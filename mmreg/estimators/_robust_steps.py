@@ -1020,23 +1020,27 @@ def boundary_layers(
     pending = rows[candidate[own]]
     k = neighbours.k
     while len(pending):
-        cluster = labels[pending]
+        # Most points pending (no static world exempt): every point is scanned with the
+        # table read in place, cheaper than copying the pending points' entries.
+        dense = k <= neighbours.k and 4 * len(pending) >= 3 * len(labels)
+        scanned = np.arange(len(labels)) if dense else pending
+        cluster = labels[scanned]
         reach = limit[cluster]
-        settled_near = np.zeros(len(pending), dtype=bool)
-        reaches = np.zeros(len(pending), dtype=bool)  # the k-th neighbour within reach
-        # Every point pending (no static world exempt): the table is read in place.
-        whole = len(pending) == len(labels) and k <= neighbours.k
-        for start in range(0, len(pending), _BLOCK_ROWS):
+        settled_near = np.zeros(len(scanned), dtype=bool)
+        reaches = np.zeros(len(scanned), dtype=bool)  # the k-th neighbour within reach
+        for start in range(0, len(scanned), _BLOCK_ROWS):
             block = slice(start, start + _BLOCK_ROWS)
-            if whole:
+            if dense:
                 distance, index = neighbours.distance[block, :k], neighbours.index[block, :k]
             else:
-                distance, index = neighbours.nearest(pending[block], k)
+                distance, index = neighbours.nearest(scanned[block], k)
             others = counted[index]
             within = distance <= reach[block, None]
             foreign = (others >= 0) & (others != cluster[block, None]) & within
             settled_near[block] = foreign.any(axis=1)
             reaches[block] = within[:, -1]
+        if dense:
+            cluster, settled_near, reaches = (x[pending] for x in (cluster, settled_near, reaches))
         open_ = ~settled_near & reaches & (k < len(neighbours))
         near += np.bincount(cluster[settled_near], minlength=n_clusters)
         still_open = np.bincount(cluster[open_], minlength=n_clusters)
