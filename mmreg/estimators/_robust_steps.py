@@ -1094,13 +1094,13 @@ def stray_members(own, listed, depth):
     label ``own`` (:func:`scattered_clusters`); ``listed``: the neighbours' labels,
     nearest first, the row itself left out. A row with ``depth`` 0 is no stray."""
     same = listed == own[:, None]
-    mine = np.empty(len(own), dtype=np.intp)
     # Rows that look at every listed neighbour count them; the rest (members of small
     # clusters) count along the row up to their depth.
     full = depth == listed.shape[1]
     if full.all():
         mine = np.count_nonzero(same, axis=1)
     else:
+        mine = np.zeros(len(own), dtype=np.intp)
         mine[full] = np.count_nonzero(same[full], axis=1)
         short = np.flatnonzero(~full & (depth > 0))
         running = np.cumsum(same[short], axis=1, dtype=np.int16)
