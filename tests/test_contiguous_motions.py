@@ -29,12 +29,8 @@ def _slab(n, seed=0):
     return np.hstack([a, b]), moving
 
 
-@pytest.mark.filterwarnings("ignore")
-@pytest.mark.parametrize("seed", [0, 1])
-def test_two_touching_motions_keep_their_points(seed):
-    X, moving = _slab(20_000, seed)
-    est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
-    # Far from any cut-off: without the fallback 100 % outliers and no cluster.
+def _assert_two_clean_motions(est, moving):
+    """Few outliers, two clusters, each of one motion's points, with that motion."""
     assert np.mean(est.labels_ < 0) < 0.1
     assert est.n_clusters_ == 2
     for j in range(2):
@@ -46,16 +42,19 @@ def test_two_touching_motions_keep_their_points(seed):
 
 
 @pytest.mark.filterwarnings("ignore")
+@pytest.mark.parametrize("seed", [0, 1])
+def test_two_touching_motions_keep_their_points(seed):
+    X, moving = _slab(20_000, seed)
+    est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
+    # Far from any cut-off: without the fallback 100 % outliers and no cluster.
+    _assert_two_clean_motions(est, moving)
+
+
+@pytest.mark.filterwarnings("ignore")
 def test_two_touching_motions_at_a_hundred_thousand_rows():
     X, moving = _slab(100_000)
     est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
     assert est.voxel_size_ is not None  # the fit ran on a voxel sample, as intended
     # Far from any cut-off: 100 % outliers and no cluster while the mean motion turned
     # the proposals; about 0 % and two clean clusters now.
-    assert np.mean(est.labels_ < 0) < 0.1
-    assert est.n_clusters_ == 2
-    for j in range(2):
-        share = moving[est.labels_ == j].mean()
-        assert share < 0.05 or share > 0.95
-    shifts = np.sort(est.translations_[:, 0])
-    np.testing.assert_allclose(shifts, [0.0, 1.0], atol=0.05)
+    _assert_two_clean_motions(est, moving)

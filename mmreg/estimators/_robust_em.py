@@ -433,7 +433,7 @@ def robust_multi_model_em(
             # like the static world, unless the E-step took most of its members from
             # it: then its motion was the mean of several (initial clusters that mix
             # motions, fitted by least squares) and would turn every hypothesis wrong.
-            anchor = static if _holds_its_members(static, own, new) else -1
+            anchored = _holds_its_members(static, own, new)
             found = []
             if run["proposals"]:
                 found = propose_clusters(
@@ -452,11 +452,7 @@ def robust_multi_model_em(
                     noise_scale=noise_scale,
                     n_hypotheses=n_hypotheses,
                     confidence=confidence,
-                    reference=(
-                        (models.rotations[anchor], models.translations[anchor])
-                        if anchor >= 0
-                        else None
-                    ),
+                    reference=reference if anchored else None,
                     per_cluster=sweep,
                 )
             for group in found:

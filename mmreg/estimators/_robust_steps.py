@@ -777,10 +777,7 @@ def join_moving_pieces(
     pairs = touching_groups(pts, own, 3.0 * float(np.median(spacing)))
     if not len(pairs):
         return root, models, 0
-    i, j = pairs[:, 0], pairs[:, 1]
-    motion = np.minimum(motion_size(models, i, static), motion_size(models, j, static))
-    gap = np.maximum(motion_gap(models, i, j), motion_gap(models, j, i))
-    pairs = pairs[gap <= tolerance * motion]
+    pairs = pairs[_motions_agree(models, pairs[:, 0], pairs[:, 1], static, tolerance)]
     if not len(pairs):
         return root, models, 0
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(k, k))
@@ -798,16 +795,22 @@ def join_moving_pieces(
 _MAX_PAIRS_TESTED_AHEAD = 1 << 15
 
 
+def _motions_agree(models, i, j, static, tolerance):
+    """The motion test of :func:`join_moving_pieces` for the pairs of clusters ``(i, j)``:
+    each one's motion carries the other's points, RMS, within ``tolerance`` times the
+    smaller of their motions relative to the ``static`` world."""
+    motion = np.minimum(motion_size(models, i, static), motion_size(models, j, static))
+    gap = np.maximum(motion_gap(models, i, j), motion_gap(models, j, i))
+    return gap <= tolerance * motion
+
+
 def _some_motions_agree(models, clusters, static, tolerance):
-    """Whether any two of ``clusters`` pass the motion test of :func:`join_moving_pieces`
-    (True, untested, when there are too many pairs to test them all ahead)."""
+    """Whether any two of ``clusters`` pass :func:`_motions_agree` (True, untested, when
+    there are too many pairs to test them all ahead)."""
     if len(clusters) * (len(clusters) - 1) // 2 > _MAX_PAIRS_TESTED_AHEAD:
         return True
     i, j = np.triu_indices(len(clusters), k=1)
-    i, j = clusters[i], clusters[j]
-    motion = np.minimum(motion_size(models, i, static), motion_size(models, j, static))
-    gap = np.maximum(motion_gap(models, i, j), motion_gap(models, j, i))
-    return bool(np.any(gap <= tolerance * motion))
+    return bool(np.any(_motions_agree(models, clusters[i], clusters[j], static, tolerance)))
 
 
 def _with(models, other):
@@ -1094,15 +1097,10 @@ def stray_members(own, listed, depth):
     label ``own`` (:func:`scattered_clusters`); ``listed``: the neighbours' labels,
     nearest first, the row itself left out. A row with ``depth`` 0 is no stray."""
     same = listed == own[:, None]
-    # Rows that look at every listed neighbour count them; the rest (members of small
-    # clusters) count along the row up to their depth.
-    full = depth == listed.shape[1]
-    if full.all():
-        mine = np.count_nonzero(same, axis=1)
-    else:
-        mine = np.zeros(len(own), dtype=np.intp)
-        mine[full] = np.count_nonzero(same[full], axis=1)
-        short = np.flatnonzero(~full & (depth > 0))
+    mine = np.count_nonzero(same, axis=1)  # rows that look at every listed neighbour
+    # Members of small clusters look at fewer: they count along the row to their depth.
+    short = np.flatnonzero((depth > 0) & (depth < listed.shape[1]))
+    if len(short):
         running = np.cumsum(same[short], axis=1, dtype=np.int16)
         mine[short] = running[np.arange(len(short)), depth[short] - 1]
     stray = np.zeros(len(own), dtype=bool)
