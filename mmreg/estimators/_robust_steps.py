@@ -876,15 +876,17 @@ def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
     return static, root, models, len(joined), slow
 
 
-def _local_samples(points, n_samples, size, rng):
+def _local_samples(points, n_samples, size, rng, tree=None):
     """Minimal samples: a random seed and ``size - 1`` of its nearest neighbours.
 
     Nearby correspondences are the likeliest to share a motion, so local samples find
     a small object's motion among many others' far more often than uniform ones.
+    ``tree``, if given, is a k-d tree of ``points``.
     """
     k_near = min(len(points), 9)
     seeds = rng.randint(len(points), size=n_samples)
-    _, near = cKDTree(points).query(points[seeds], k=k_near)
+    tree = cKDTree(points) if tree is None else tree
+    _, near = tree.query(points[seeds], k=k_near)
     near = np.asarray(near).reshape(n_samples, k_near)
     # Column 0 is the seed itself.
     picks = np.take_along_axis(
@@ -893,22 +895,59 @@ def _local_samples(points, n_samples, size, rng):
     return np.column_stack([seeds, picks])
 
 
-def _local_translations(points, targets, n_samples, reference, rng, k=9):
+def _local_translations(points, targets, n_samples, reference, rng, k=9, tree=None):
     """Hypotheses that turn like ``reference`` and shift by a neighbourhood's mean.
 
     Over the 0.1 s between two sweeps a pedestrian or a car turns little relative to the
     static world: the static world's rotation and the mean of ``b - R a`` over a random
     seed's ``k`` nearest neighbours is a motion hypothesis whose noise is averaged over
     ``k`` correspondences, where a three-point sample on a small object amplifies it.
+    ``tree``, if given, is a k-d tree of ``points``.
     """
     d = points.shape[1]
     rotation = np.eye(d) if reference is None else reference[0]
     k = min(k, len(points))
     seeds = rng.randint(len(points), size=n_samples)
-    _, near = cKDTree(points).query(points[seeds], k=k)
+    tree = cKDTree(points) if tree is None else tree
+    _, near = tree.query(points[seeds], k=k)
     near = np.asarray(near).reshape(n_samples, k)
     shifts = (targets[near] - points[near] @ rotation.T).mean(axis=1)
     return np.repeat(rotation[None], n_samples, axis=0), shifts
+
+
+def _sample_every_group(a, b, members_of, n_hypotheses, size, rng, reference, turned):
+    """The hypotheses of each group of :func:`propose_clusters`: its minimal samples'
+    motions, then (if ``turned``) its :func:`_local_translations`.
+
+    Every group draws from ``rng`` in turn; the minimal samples of all the groups are
+    then fitted in one batched solve (a sample's motion does not depend on the others
+    fitted with it), which saves a solve's fixed cost per group.
+
+    Returns
+    -------
+    list of (rotations, translations), one per group
+    """
+    drawn, shifts = [], []
+    for members in members_of:
+        pa = a[members]
+        tree = cKDTree(pa)
+        drawn.append(members[_local_samples(pa, n_hypotheses, size, rng, tree)])
+        if turned:
+            shifts.append(
+                _local_translations(pa, b[members], n_hypotheses, reference, rng, tree=tree)
+            )
+    if not drawn:
+        return []
+    rotations, translations, valid = fit_minimal_samples(a, b, np.concatenate(drawn))
+    ends = np.cumsum(np.count_nonzero(valid.reshape(len(drawn), -1), axis=1))
+    out = []
+    for i, (start, end) in enumerate(zip(np.concatenate([[0], ends[:-1]]), ends, strict=True)):
+        turns, moves = rotations[start:end], translations[start:end]
+        if turned:
+            turns = np.concatenate([turns, shifts[i][0]])
+            moves = np.concatenate([moves, shifts[i][1]])
+        out.append((turns, moves))
+    return out
 
 
 def _explains_its_surroundings(points, inliers):
@@ -1276,15 +1315,10 @@ def propose_clusters(
     # Volume of a d-ball of radius 1.
     unit_ball = np.pi ** (d / 2) / gamma(d / 2 + 1)
     accepted = []
-    for c in groups:
-        members = rows[component == c]
+    members_of = [rows[component == c] for c in groups]
+    sampled = _sample_every_group(a, b, members_of, n_hypotheses, size, rng, reference, per_cluster)
+    for members, (rotations, translations) in zip(members_of, sampled, strict=True):
         pa, pb, g = a[members], b[members], noise_scale[members]
-        samples = _local_samples(pa, n_hypotheses, size, rng)
-        rotations, translations, valid = fit_minimal_samples(pa, pb, samples)
-        if per_cluster:
-            turn, shift = _local_translations(pa, pb, n_hypotheses, reference, rng)
-            rotations = np.concatenate([rotations, turn])
-            translations = np.concatenate([translations, shift])
         if not len(rotations):
             continue
         moved = np.einsum("hij,nj->hni", rotations, pa) + translations[:, None, :]
