@@ -1,9 +1,9 @@
 """Scene flow from fitted clusters: every point moved by the rigid motion of its object."""
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from mmreg._geometry import apply_motions
+from mmreg._neighbors import lookup_tree
 
 __all__ = ["rigid_flow"]
 
@@ -50,6 +50,6 @@ def rigid_flow(a, labels, rotations, translations, *, workers=1):
         return np.full(a.shape, np.nan)
     labels = labels.copy()
     if len(outliers):
-        _, nearest = cKDTree(a[clustered]).query(a[outliers], workers=workers)
+        _, nearest = lookup_tree(a[clustered]).query(a[outliers], workers=workers)
         labels[outliers] = labels[clustered[nearest]]
     return apply_motions(a, rotations, translations, labels) - a

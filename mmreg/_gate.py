@@ -21,10 +21,10 @@ settle almost all of those:
 """
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from mmreg._geometry import column_bounds
 from mmreg._grouping import unique_sorted
+from mmreg._neighbors import lookup_tree
 
 __all__ = ["ClusterGate", "gated_argmax"]
 
@@ -252,7 +252,7 @@ class ClusterGate:
                 dist[start : start + step] = np.sqrt(np.sum(diff * diff, axis=-1)).min(axis=1)
             return dist <= self.radius
         if tree is None:
-            tree = self._trees[cluster] = cKDTree(members)
+            tree = self._trees[cluster] = lookup_tree(members)
         # The tree reports only distances below the bound; one ulp more keeps "== radius".
         bound = np.nextafter(self.radius, np.inf)
         dist, _ = tree.query(query, k=1, distance_upper_bound=bound, workers=self.workers)

@@ -38,7 +38,7 @@ from sklearn.utils import check_random_state
 from mmreg._gate import ClusterGate
 from mmreg._geometry import row_medians
 from mmreg._likelihood import morton_order, single_threaded_blas
-from mmreg._neighbors import NeighbourTable
+from mmreg._neighbors import NeighbourTable, lookup_tree
 from mmreg._relabelling import rows_moved
 from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
 from mmreg.estimators._robust_steps import (
@@ -740,7 +740,7 @@ def propose_in_the_rest(
         if reference is not None:
             slowly = moves_slowly(a, b, found, reference, sigma_floor, min_motion, noise_scale)
             found = list(compress(found, ~slowly))
-        tree = cKDTree(a) if tree is None else tree
+        tree = lookup_tree(a) if tree is None else tree
         judged = [_has_a_body(tree, labels, moves, group) for group in found]
         bodies = [
             (group, touches) for group, (body, touches) in zip(found, judged, strict=True) if body
