@@ -16,6 +16,7 @@ __all__ = [
     "fit_rigid",
     "fit_rigid_grouped",
     "fit_rigid_rows",
+    "residual_table",
     "residuals",
     "rotation_angle",
     "row_medians",
@@ -254,6 +255,61 @@ def residuals(a, b, rotations, translations, labels):
     res = b - moved
     res[np.asarray(labels) < 0] = 0.0
     return res
+
+
+# The order in which numpy's einsum (x86-64) adds the d terms of a length-d contraction
+# over a contiguous last axis (d = 2, 3); residual_table adds them in the same order.
+_EINSUM_ORDER = {2: (0, 1), 3: (0, 2, 1)}
+
+
+def residual_table(rotations, translations, a_rows, b_rows):
+    """``||b_i - R_k a_i - t_k||^2`` of every motion ``k`` and correspondence ``i``.
+
+    The direct reading over ``(n, K, d)`` arrays, ``diff = b - einsum("kij,nj->nki",
+    R, a) - t`` and ``einsum("nki,nki->nk", diff, diff)``, in ``(K, n)`` layout, one
+    coordinate at a time: every operation runs over long contiguous rows, at about two
+    thirds of the cost. For ``d`` of 2 and 3 the terms are added in the order numpy's
+    einsum adds them on x86-64, so there it gives einsum's floats.
+
+    Parameters
+    ----------
+    rotations : ndarray of shape (K, d, d)
+    translations : ndarray of shape (K, d)
+    a_rows, b_rows : ndarray of shape (d, n)
+        Corresponding points, one coordinate per row.
+
+    Returns
+    -------
+    ndarray of shape (K, n)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._geometry import residual_table
+    >>> a = np.array([[0.0, 1.0], [0.0, 0.0], [0.0, 0.0]])  # the points (0,0,0), (1,0,0)
+    >>> residual_table(np.stack([np.eye(3)] * 2), np.array([[0, 0, 0], [1, 0, 0.0]]), a, a)
+    array([[0., 0.],
+           [1., 1.]])
+    """
+    d = len(a_rows)
+    order = _EINSUM_ORDER.get(d)
+    if order is None:
+        moved = np.einsum("kij,jn->nki", rotations, a_rows) + translations
+        diff = b_rows.T[:, None, :] - moved
+        return np.einsum("nki,nki->nk", diff, diff).T
+    table = None
+    for i in order:
+        term = rotations[:, i, order[0], None] * a_rows[order[0]]
+        for j in order[1:]:
+            term += rotations[:, i, j, None] * a_rows[j]
+        term += translations[:, i, None]
+        np.subtract(b_rows[i], term, out=term)
+        term *= term
+        if table is None:
+            table = term
+        else:
+            table += term
+    return table
 
 
 def squared_residuals_all(a, b, rotations, translations):

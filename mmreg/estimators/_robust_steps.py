@@ -24,7 +24,7 @@ from scipy.special import gamma
 from scipy.stats import binom, chi2
 
 from mmreg._connectivity import tau_components
-from mmreg._geometry import column_bounds
+from mmreg._geometry import column_bounds, residual_table
 from mmreg._grouping import sorted_within_groups, unique_sorted
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg._likelihood import morton_order
@@ -474,16 +474,22 @@ def assign_correspondences(
         log_prior = np.log(weights) - d * np.log(sigmas)
     half_precision = 0.5 / sigmas**2
     g2 = np.ones(n) if noise_scale is None else noise_scale**2
+    a_rows, b_rows = np.ascontiguousarray(a.T), np.ascontiguousarray(b.T)
     for start in range(0, n, _RUN):
         rows = order[start : start + _RUN]
-        pa, pb = a[rows], b[rows]
+        pa = a[rows]
         candidates = np.flatnonzero(gate.reach_boxes(pa.min(axis=0)[None], pa.max(axis=0)[None])[0])
         if not len(candidates):
             continue
-        moved = np.einsum("kij,nj->nki", rotations[candidates], pa) + translations[candidates]
-        diff = pb[:, None, :] - moved
-        sq = np.einsum("nki,nki->nk", diff, diff) / g2[rows, None]
-        score = log_prior[candidates] - half_precision[candidates] * sq
+        sq = residual_table(
+            rotations[candidates],
+            translations[candidates],
+            a_rows[:, rows],
+            b_rows[:, rows],
+        )
+        sq /= g2[rows]
+        sq *= half_precision[candidates, None]
+        score = np.ascontiguousarray((log_prior[candidates, None] - sq).T)
         column = np.full(k + 1, -1, dtype=np.intp)
         column[candidates] = np.arange(len(candidates))
         own_column = column[own[rows]]
