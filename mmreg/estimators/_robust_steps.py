@@ -489,23 +489,24 @@ def assign_correspondences(
         )
         sq /= g2[rows]
         sq *= half_precision[candidates, None]
-        score = np.ascontiguousarray((log_prior[candidates, None] - sq).T)
+        # One row per candidate cluster, one column per correspondence.
+        score = log_prior[candidates, None] - sq
         column = np.full(k + 1, -1, dtype=np.intp)
         column[candidates] = np.arange(len(candidates))
         own_column = column[own[rows]]
         has_own = own_column >= 0
         own_score = np.full(len(rows), -np.inf)
-        own_score[has_own] = score[np.flatnonzero(has_own), own_column[has_own]]
-        challenger = score > own_score[:, None]
+        own_score[has_own] = score[own_column[has_own], np.flatnonzero(has_own)]
+        challenger = score > own_score
         while True:
-            live = np.flatnonzero(challenger.any(axis=1))
+            live = np.flatnonzero(np.logical_or.reduce(challenger, axis=0))
             if not len(live):
                 break
-            best = np.argmax(np.where(challenger[live], score[live], -np.inf), axis=1)
+            best = np.argmax(np.where(challenger[:, live], score[:, live], -np.inf), axis=0)
             admitted = gate.admits(pa[live], candidates[best])
             labels[rows[live[admitted]]] = candidates[best[admitted]]
-            challenger[live[admitted]] = False
-            challenger[live[~admitted], best[~admitted]] = False
+            challenger[:, live[admitted]] = False
+            challenger[best[~admitted], live[~admitted]] = False
     return labels
 
 
