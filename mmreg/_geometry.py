@@ -262,14 +262,14 @@ def residuals(a, b, rotations, translations, labels):
 _EINSUM_ORDER = {2: (0, 1), 3: (0, 2, 1)}
 
 
-def residual_table(rotations, translations, a_rows, b_rows):
+def residual_table(rotations, translations, a_rows, b_rows, *, origins=None):
     """``||b_i - R_k a_i - t_k||^2`` of every motion ``k`` and correspondence ``i``.
 
     The direct reading over ``(n, K, d)`` arrays, ``diff = b - einsum("kij,nj->nki",
     R, a) - t`` and ``einsum("nki,nki->nk", diff, diff)``, in ``(K, n)`` layout, one
-    coordinate at a time: every operation runs over long contiguous rows, at about two
-    thirds of the cost. For ``d`` of 2 and 3 the terms are added in the order numpy's
-    einsum adds them on x86-64, so there it gives einsum's floats.
+    coordinate at a time: every operation runs over long contiguous rows, at a fraction
+    of the cost. For ``d`` of 2 and 3 the terms are added in the order numpy's einsum
+    adds them on x86-64, so there it gives einsum's floats.
 
     Parameters
     ----------
@@ -277,10 +277,15 @@ def residual_table(rotations, translations, a_rows, b_rows):
     translations : ndarray of shape (K, d)
     a_rows, b_rows : ndarray of shape (d, n)
         Corresponding points, one coordinate per row.
+    origins : ndarray of shape (d, n), default=None
+        If given, also the distance ``||R_k a_i + t_k - o_i||`` of every moved point
+        from its origin (as ``np.linalg.norm`` over the coordinates gives it).
 
     Returns
     -------
-    ndarray of shape (K, n)
+    table : ndarray of shape (K, n)
+    distance : ndarray of shape (K, n)
+        Only with ``origins``.
 
     Examples
     --------
@@ -292,24 +297,31 @@ def residual_table(rotations, translations, a_rows, b_rows):
            [1., 1.]])
     """
     d = len(a_rows)
-    order = _EINSUM_ORDER.get(d)
-    if order is None:
-        moved = np.einsum("kij,jn->nki", rotations, a_rows) + translations
-        diff = b_rows.T[:, None, :] - moved
-        return np.einsum("nki,nki->nk", diff, diff).T
+    order = _EINSUM_ORDER.get(d, tuple(range(d)))
     table = None
+    squares = [None] * d  # of the distances from the origins, by coordinate
     for i in order:
-        term = rotations[:, i, order[0], None] * a_rows[order[0]]
-        for j in order[1:]:
-            term += rotations[:, i, j, None] * a_rows[j]
+        if d in _EINSUM_ORDER:
+            term = rotations[:, i, order[0], None] * a_rows[order[0]]
+            for j in order[1:]:
+                term += rotations[:, i, j, None] * a_rows[j]
+        else:
+            term = np.einsum("kj,jn->kn", rotations[:, i], a_rows)
         term += translations[:, i, None]
+        if origins is not None:
+            squares[i] = np.square(term - origins[i])
         np.subtract(b_rows[i], term, out=term)
         term *= term
         if table is None:
             table = term
         else:
             table += term
-    return table
+    if origins is None:
+        return table
+    distance = squares[0]
+    for square in squares[1:]:
+        distance += square
+    return table, np.sqrt(distance, out=distance)
 
 
 def squared_residuals_all(a, b, rotations, translations):

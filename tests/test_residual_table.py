@@ -32,6 +32,14 @@ def test_residual_table_is_the_direct_reading(d, k, n, scale, seed):
     assert got.shape == (k, n)
     expected = direct(rotations, translations, a, b)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * scale**2)
+    origins = a + rng.normal(scale=scale, size=(n, d))
+    table, distance = residual_table(
+        rotations, translations, np.ascontiguousarray(a.T), b.T.copy(), origins=origins.T.copy()
+    )
+    np.testing.assert_array_equal(table, got)
+    moved = np.einsum("kij,nj->kni", rotations, a) + translations[:, None, :]
+    expected = np.linalg.norm(moved - origins, axis=2)
+    np.testing.assert_allclose(distance, expected, rtol=1e-12, atol=1e-12 * scale)
 
 
 def test_a_motion_that_explains_a_row_leaves_no_residual():

@@ -1328,14 +1328,19 @@ def propose_clusters(
         pa, pb, g = a[members], b[members], noise_scale[members]
         if not len(rotations):
             continue
-        moved = np.einsum("hij,nj->hni", rotations, pa) + translations[:, None, :]
-        sq = np.einsum("hni,hni->hn", pb[None] - moved, pb[None] - moved) / g**2
+        a_rows, b_rows = np.ascontiguousarray(pa.T), np.ascontiguousarray(pb.T)
         if not per_cluster:  # the shared scale: the hypothesis with most inliers wins
+            sq = residual_table(rotations, translations, a_rows, b_rows)
+            sq /= g**2
             sigma = scale
             best = int(np.argmax((sq <= chi2_limit * sigma**2).sum(axis=1)))
         else:
             base = pa if reference is None else pa @ reference[0].T + reference[1]
-            motion = np.median(np.linalg.norm(moved - base[None], axis=2), axis=1)
+            sq, moved_by = residual_table(
+                rotations, translations, a_rows, b_rows, origins=np.ascontiguousarray(base.T)
+            )
+            sq /= g**2
+            motion = np.median(moved_by, axis=1)
             # The a-contrario test below, with the members' median noise scale.
             spread, m = float(np.median(g)), len(members)
 
