@@ -16,6 +16,7 @@ __all__ = [
     "fit_rigid",
     "fit_rigid_grouped",
     "fit_rigid_rows",
+    "own_residuals",
     "residual_table",
     "residuals",
     "rotation_angle",
@@ -322,6 +323,44 @@ def residual_table(rotations, translations, a_rows, b_rows, *, origins=None):
     for square in squares[1:]:
         distance += square
     return table, np.sqrt(distance, out=distance)
+
+
+def own_residuals(rotations, translations, labels, a_rows, b_rows):
+    """``||b_i - R_l a_i - t_l||^2`` of every correspondence under its own motion ``l``.
+
+    The direct reading, ``diff = b - einsum("nij,nj->ni", R[labels], a) - t[labels]``
+    and ``einsum("ij,ij->i", diff, diff)``, one coordinate at a time over contiguous
+    rows, without the ``(n, d, d)`` copy of the rotations; for ``d`` of 2 and 3 the terms
+    are added in einsum's order, as in :func:`residual_table`.
+
+    Parameters
+    ----------
+    rotations : ndarray of shape (K, d, d)
+    translations : ndarray of shape (K, d)
+    labels : ndarray of int of shape (n,)
+        The motion of each correspondence, in ``0..K-1``.
+    a_rows, b_rows : ndarray of shape (d, n)
+
+    Returns
+    -------
+    ndarray of shape (n,)
+    """
+    d = len(a_rows)
+    order = _EINSUM_ORDER.get(d, tuple(range(d)))
+    entries = rotations.reshape(len(rotations), d * d).T  # entry (i, j) is row i * d + j
+    total = None
+    for i in order:
+        term = entries[i * d + order[0]][labels] * a_rows[order[0]]
+        for j in order[1:]:
+            term += entries[i * d + j][labels] * a_rows[j]
+        term += translations[:, i][labels]
+        np.subtract(b_rows[i], term, out=term)
+        term *= term
+        if total is None:
+            total = term
+        else:
+            total += term
+    return total
 
 
 def squared_residuals_all(a, b, rotations, translations):

@@ -1,11 +1,11 @@
-"""residual_table against the direct reading of ||b - R a - t||^2 over (n, K, d) arrays."""
+"""residual_table and own_residuals against the direct readings of ||b - R a - t||^2."""
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import special_ortho_group
 
-from mmreg._geometry import residual_table
+from mmreg._geometry import own_residuals, residual_table
 
 
 def direct(rotations, translations, a, b):
@@ -50,3 +50,24 @@ def test_a_motion_that_explains_a_row_leaves_no_residual():
     table = residual_table(np.stack([np.eye(3), turn]), np.stack([np.zeros(3), shift]), a, b)
     np.testing.assert_array_equal(table[1], 0.0)
     np.testing.assert_allclose(table[0], np.sum((b - a) ** 2, axis=0))
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    d=st.sampled_from([2, 3, 4]),
+    k=st.integers(1, 12),
+    n=st.integers(0, 50),
+    scale=st.sampled_from([1e-3, 1.0, 1e3]),
+    seed=st.integers(0, 2**16),
+)
+def test_own_residuals_are_the_direct_reading(d, k, n, scale, seed):
+    rng = np.random.default_rng(seed)
+    rotations = special_ortho_group.rvs(d, size=k, random_state=seed).reshape(k, d, d)
+    translations = rng.normal(scale=scale, size=(k, d))
+    labels = rng.integers(0, k, size=n)
+    a = rng.normal(scale=scale, size=(n, d))
+    b = a + rng.normal(scale=scale / 10, size=(n, d))
+    diff = b - np.einsum("nij,nj->ni", rotations[labels], a) - translations[labels]
+    got = own_residuals(rotations, translations, labels, a.T, b.T)
+    expected = np.einsum("ij,ij->i", diff, diff)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * scale**2)

@@ -24,7 +24,7 @@ from scipy.special import gamma
 from scipy.stats import binom, chi2
 
 from mmreg._connectivity import tau_components
-from mmreg._geometry import column_bounds, residual_table
+from mmreg._geometry import column_bounds, own_residuals, residual_table
 from mmreg._grouping import sorted_within_groups, unique_sorted
 from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg._likelihood import morton_order
@@ -140,10 +140,7 @@ def squared_residuals(a, b, labels, rotations, translations):
     out = np.full(len(a), np.inf)
     rows = np.flatnonzero(labels >= 0)
     if len(rows):
-        j = labels[rows]
-        moved = np.einsum("nij,nj->ni", rotations[j], a[rows]) + translations[j]
-        diff = b[rows] - moved
-        out[rows] = np.einsum("ij,ij->i", diff, diff)
+        out[rows] = own_residuals(rotations, translations, labels[rows], a[rows].T, b[rows].T)
     return out
 
 
