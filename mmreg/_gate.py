@@ -14,15 +14,12 @@ settle almost all of those:
   ``||a - c_j|| > rho_j + tau``;
 * a few representative members per cluster (the one nearest the centroid, the first and
   the last) open it when one of them is within ``tau``;
-* a member in the query's own grid cell opens it: cells of side just under
-  ``tau / sqrt(d)`` have a diagonal shorter than ``tau``;
 * the exact nearest-member distance decides the rest: by brute force for a handful of
   queries, else with a KD-tree of the cluster built once per gate.
 """
 
 import numpy as np
 
-from mmreg._geometry import column_bounds
 from mmreg._grouping import unique_sorted
 from mmreg._neighbors import lookup_tree
 
@@ -30,12 +27,6 @@ __all__ = ["ClusterGate", "gated_argmax"]
 
 # Brute force beats building a KD-tree below this many (query, member) distance pairs.
 _BRUTE_FORCE_PAIRS = 2**17
-# The shared-cell test's cells are this much narrower than tau / sqrt(d), so that two
-# points in one cell are closer than tau by far more than any rounding of the cell
-# numbers (below 1e-9 of a cell with at most _MAX_CELLS cells per axis) or of the
-# distance.
-_CELL_MARGIN = 1e-6
-_MAX_CELLS = 2**20
 
 
 class ClusterGate:
@@ -108,7 +99,6 @@ class ClusterGate:
         self._ball_radius = ball_radius[:n_clusters]
         self._spread = spread
         self._representatives = None
-        self._cells = None
 
     def reach_box(self, low, high):
         """Clusters whose bounding ball comes within ``radius`` of the box ``[low, high]``.
@@ -168,55 +158,12 @@ class ClusterGate:
         result[open_[near]] = True
         undecided = open_[~near]
         if len(undecided):
-            shared = self._shares_a_cell(query[undecided], clusters[undecided])
-            result[undecided[shared]] = True
-            undecided = undecided[~shared]
-        if len(undecided):
             order = np.argsort(clusters[undecided], kind="stable")
             undecided = undecided[order]
             targets, starts = unique_sorted(clusters[undecided])
             for cluster, part in zip(targets, np.split(undecided, starts[1:]), strict=True):
                 result[part] = self.within(query[part], cluster)
         return result
-
-    def _shares_a_cell(self, query, clusters):
-        """True where a member of the cluster lies in the query point's grid cell (then
-        within ``radius`` of it); False says nothing."""
-        if self._cells is None:
-            self._cells = self._occupied_cells()
-        low, side, dims, occupied = self._cells
-        if occupied is None:
-            return np.zeros(len(query), dtype=bool)
-        cells = np.floor((query - low) / side)
-        inside = np.all((cells >= 0) & (cells < dims), axis=1)
-        hit = np.zeros(len(query), dtype=bool)
-        if inside.any():
-            key = np.ravel_multi_index(tuple(cells[inside].astype(np.int64).T), dims)
-            key = key * (self.n_clusters + 1) + clusters[inside]
-            where = np.minimum(np.searchsorted(occupied, key), len(occupied) - 1)
-            hit[inside] = occupied[where] == key
-        return hit
-
-    def _occupied_cells(self):
-        """The sorted (cell, cluster) codes of the clustered points, with the grid's
-        corner, side and shape; no codes if the grid is too fine to number."""
-        points, labels = self._points, self._labels
-        d = points.shape[1]
-        side = self.radius / np.sqrt(d) * (1.0 - _CELL_MARGIN)
-        clustered = labels < self.n_clusters
-        if side <= 0 or not clustered.any():
-            return None, None, None, None
-        low, high = column_bounds(points[clustered])
-        dims = np.floor((high - low) / side).astype(np.int64) + 1
-        if (
-            dims.max() > _MAX_CELLS
-            or np.prod(dims.astype(float)) * (self.n_clusters + 1) >= 2.0**62
-        ):
-            return None, None, None, None
-        cells = np.floor((points[clustered] - low) / side).astype(np.int64)
-        key = np.ravel_multi_index(tuple(cells.T), tuple(dims))
-        key = key * (self.n_clusters + 1) + labels[clustered]
-        return low, side, dims, unique_sorted(key)[0]
 
     def _find_representatives(self):
         """A few members per cluster: the one nearest the centroid, the first and the last.

@@ -53,22 +53,10 @@ def test_admits_is_the_nearest_member_within_radius(scene, brute_force):
     np.testing.assert_array_equal(got, expected)
 
 
-def test_a_member_in_the_query_cell_opens_the_gate_without_the_exact_test(monkeypatch):
+def test_a_query_beside_the_middle_of_a_line_is_decided_exactly():
     # A line of members 1 apart: its representatives (first, last, nearest the centroid)
-    # are all far from a query beside its middle, so only the shared cell opens it.
+    # are all far from a query beside its middle, so the exact test decides.
     line = np.column_stack([np.arange(101.0), np.zeros(101), np.zeros(101)])
     gate = ClusterGate(line, np.zeros(101, dtype=np.intp), 1, 2.0)
-
-    def no_exact_test(*args, **kwargs):
-        raise AssertionError("the exact test ran")
-
-    monkeypatch.setattr(ClusterGate, "within", no_exact_test)
-    assert gate.admits(np.array([[25.3, 0.5, 0.0]]), np.array([0])).tolist() == [True]
-
-
-def test_a_query_in_an_empty_cell_is_decided_exactly():
-    line = np.column_stack([np.arange(101.0), np.zeros(101), np.zeros(101)])
-    gate = ClusterGate(line, np.zeros(101, dtype=np.intp), 1, 2.0)
-    # 1.6 and 2.6 from the line: one cell away from every member, on either side of tau.
-    query = np.array([[25.3, 1.6, 0.0], [25.3, 2.6, 0.0]])
+    query = np.array([[25.3, 1.6, 0.0], [25.3, 2.6, 0.0]])  # 1.6 and 2.6 from the line
     assert gate.admits(query, np.array([0, 0])).tolist() == [True, False]
