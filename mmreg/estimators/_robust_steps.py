@@ -471,18 +471,27 @@ def assign_correspondences(
         log_prior = np.log(weights) - d * np.log(sigmas)
     half_precision = 0.5 / sigmas**2
     g2 = np.ones(n) if noise_scale is None else noise_scale**2
-    a_rows, b_rows = np.ascontiguousarray(a.T), np.ascontiguousarray(b.T)
-    for start in range(0, n, _RUN):
+    if n == 0:
+        return labels
+    # The points in run order, once; every run's bounding box and the clusters that may
+    # reach it, at once.
+    ordered = a[order]
+    a_rows, b_rows = np.ascontiguousarray(ordered.T), np.ascontiguousarray(b[order].T)
+    starts = np.arange(0, n, _RUN)
+    reach = gate.reach_boxes(
+        np.minimum.reduceat(ordered, starts, axis=0), np.maximum.reduceat(ordered, starts, axis=0)
+    )
+    for run, start in enumerate(starts):
         rows = order[start : start + _RUN]
-        pa = a[rows]
-        candidates = np.flatnonzero(gate.reach_boxes(pa.min(axis=0)[None], pa.max(axis=0)[None])[0])
+        pa = ordered[start : start + _RUN]
+        candidates = np.flatnonzero(reach[run])
         if not len(candidates):
             continue
         sq = residual_table(
             rotations[candidates],
             translations[candidates],
-            a_rows[:, rows],
-            b_rows[:, rows],
+            a_rows[:, start : start + _RUN],
+            b_rows[:, start : start + _RUN],
         )
         sq /= g2[rows]
         sq *= half_precision[candidates, None]
