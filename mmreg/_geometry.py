@@ -16,6 +16,7 @@ __all__ = [
     "fit_rigid",
     "fit_rigid_grouped",
     "fit_rigid_rows",
+    "moved_rows",
     "own_residuals",
     "residual_table",
     "residuals",
@@ -235,6 +236,12 @@ def row_medians(values):
     return (columns[k // 2 - 1] + columns[k // 2]) / 2
 
 
+# The order in which numpy's einsum (x86-64) adds the d terms of a length-d contraction
+# over a contiguous last axis (d = 2, 3); moved_rows, own_residuals and
+# residual_table add them in the same order.
+_EINSUM_ORDER = {2: (0, 1), 3: (0, 2, 1)}
+
+
 def apply_motions(a, rotations, translations, labels):
     """Move each point by the motion of its group: ``R_{l_i} a_i + t_{l_i}``.
 
@@ -243,10 +250,42 @@ def apply_motions(a, rotations, translations, labels):
     a = np.asarray(a, dtype=float)
     labels = np.asarray(labels)
     out = a.copy()
-    keep = labels >= 0
-    lab = labels[keep]
-    out[keep] = np.einsum("nij,nj->ni", rotations[lab], a[keep]) + translations[lab]
+    keep = np.flatnonzero(labels >= 0)
+    out[keep] = moved_rows(rotations, translations, labels[keep], a[keep].T).T
     return out
+
+
+def moved_rows(rotations, translations, labels, a_rows):
+    """``R_l a_i + t_l`` of every point under its own motion ``l``, coordinates as rows.
+
+    The direct reading ``einsum("nij,nj->ni", R[labels], a) + t[labels]``, one
+    coordinate at a time over contiguous rows and without the ``(n, d, d)`` copy of the
+    rotations (less than half the cost); for ``d`` of 2 and 3 the terms are added in
+    einsum's order, as in :func:`residual_table`.
+
+    Parameters
+    ----------
+    rotations : ndarray of shape (K, d, d)
+    translations : ndarray of shape (K, d)
+    labels : ndarray of int of shape (n,)
+        The motion of each point, in ``0..K-1``.
+    a_rows : ndarray of shape (d, n)
+
+    Returns
+    -------
+    ndarray of shape (d, n)
+    """
+    d = len(a_rows)
+    order = _EINSUM_ORDER.get(d, tuple(range(d)))
+    entries = np.asarray(rotations, dtype=float).reshape(-1, d * d).T  # (i, j): row i*d + j
+    moved = np.empty((d, len(labels)))
+    for i in range(d):
+        term = moved[i]
+        np.multiply(entries[i * d + order[0]][labels], a_rows[order[0]], out=term)
+        for j in order[1:]:
+            term += entries[i * d + j][labels] * a_rows[j]
+        term += np.asarray(translations, dtype=float)[:, i][labels]
+    return moved
 
 
 def residuals(a, b, rotations, translations, labels):
@@ -256,11 +295,6 @@ def residuals(a, b, rotations, translations, labels):
     res = b - moved
     res[np.asarray(labels) < 0] = 0.0
     return res
-
-
-# The order in which numpy's einsum (x86-64) adds the d terms of a length-d contraction
-# over a contiguous last axis (d = 2, 3); residual_table adds them in the same order.
-_EINSUM_ORDER = {2: (0, 1), 3: (0, 2, 1)}
 
 
 def residual_table(rotations, translations, a_rows, b_rows, *, origins=None):
@@ -329,9 +363,8 @@ def own_residuals(rotations, translations, labels, a_rows, b_rows):
     """``||b_i - R_l a_i - t_l||^2`` of every correspondence under its own motion ``l``.
 
     The direct reading, ``diff = b - einsum("nij,nj->ni", R[labels], a) - t[labels]``
-    and ``einsum("ij,ij->i", diff, diff)``, one coordinate at a time over contiguous
-    rows, without the ``(n, d, d)`` copy of the rotations; for ``d`` of 2 and 3 the terms
-    are added in einsum's order, as in :func:`residual_table`.
+    and ``einsum("ij,ij->i", diff, diff)``, from :func:`moved_rows`; for ``d`` of 2 and
+    3 the squares are added in einsum's order, as in :func:`residual_table`.
 
     Parameters
     ----------
@@ -347,19 +380,12 @@ def own_residuals(rotations, translations, labels, a_rows, b_rows):
     """
     d = len(a_rows)
     order = _EINSUM_ORDER.get(d, tuple(range(d)))
-    entries = rotations.reshape(len(rotations), d * d).T  # entry (i, j) is row i * d + j
-    total = None
-    for i in order:
-        term = entries[i * d + order[0]][labels] * a_rows[order[0]]
-        for j in order[1:]:
-            term += entries[i * d + j][labels] * a_rows[j]
-        term += translations[:, i][labels]
-        np.subtract(b_rows[i], term, out=term)
-        term *= term
-        if total is None:
-            total = term
-        else:
-            total += term
+    moved = moved_rows(rotations, translations, labels, a_rows)
+    np.subtract(b_rows, moved, out=moved)
+    moved *= moved
+    total = moved[order[0]]
+    for i in order[1:]:
+        total += moved[i]
     return total
 
 

@@ -1,11 +1,11 @@
-"""residual_table and own_residuals against the direct readings of ||b - R a - t||^2."""
+"""residual_table, own_residuals and apply_motions against the direct einsum readings."""
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import special_ortho_group
 
-from mmreg._geometry import own_residuals, residual_table
+from mmreg._geometry import apply_motions, own_residuals, residual_table
 
 
 def direct(rotations, translations, a, b):
@@ -71,3 +71,26 @@ def test_own_residuals_are_the_direct_reading(d, k, n, scale, seed):
     got = own_residuals(rotations, translations, labels, a.T, b.T)
     expected = np.einsum("ij,ij->i", diff, diff)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * scale**2)
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    d=st.sampled_from([2, 3, 4]),
+    k=st.integers(1, 12),
+    n=st.integers(0, 50),
+    scale=st.sampled_from([1e-3, 1.0, 1e3]),
+    seed=st.integers(0, 2**16),
+)
+def test_apply_motions_is_the_direct_reading(d, k, n, scale, seed):
+    rng = np.random.default_rng(seed)
+    rotations = special_ortho_group.rvs(d, size=k, random_state=seed).reshape(k, d, d)
+    translations = rng.normal(scale=scale, size=(k, d))
+    labels = rng.integers(-1, k, size=n)  # -1: left where it is
+    a = rng.normal(scale=scale, size=(n, d))
+    got = apply_motions(a, rotations, translations, labels)
+    keep = labels >= 0
+    expected = a.copy()
+    expected[keep] = np.einsum("nij,nj->ni", rotations[labels[keep]], a[keep])
+    expected[keep] += translations[labels[keep]]
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * scale)
+    np.testing.assert_array_equal(got[~keep], a[~keep])
