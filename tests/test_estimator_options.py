@@ -54,7 +54,7 @@ def test_n_jobs_reaches_the_tree_queries_and_changes_nothing(scene, variant, mon
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         one.fit(scene.X)
-        for module in (mmreg._gate, mmreg._flow, mmreg.estimators._robust_em):
+        for module in (mmreg._neighbors, mmreg.estimators._robust_em):
             monkeypatch.setattr(module, "cKDTree", _SpyTree)
         _SpyTree.seen = []
         two = MultiModelRegistration(init=init, variant=variant, random_state=0, n_jobs=2)
