@@ -73,6 +73,12 @@ def real_benchmark():
     return module
 
 
+@pytest.fixture(autouse=True)
+def quick_yardstick(real_benchmark, monkeypatch):
+    """The machine's speed as a constant: the real yardstick costs a second a call."""
+    monkeypatch.setattr(real_benchmark, "machine_speed", lambda: 0.25)
+
+
 @pytest.fixture
 def fake_data(tmp_path):
     data = tmp_path / "realdata"
@@ -114,6 +120,7 @@ def test_benchmark_on_fake_data(real_benchmark, fake_data, tmp_path, capsys):
     assert (table.loc[table["method"] == "sequential_ransac", "init_s"] == 0).all()
     markdown = (out / "real.md").read_text()
     assert "| scene" in markdown and "av2_api_7fab2350/noisy" in markdown
+    assert "0.250 s before the run, 0.250 s after" in markdown
     assert "3-way" in capsys.readouterr().out
 
 
@@ -199,3 +206,11 @@ def test_repeats_must_be_positive(real_benchmark, fake_data, tmp_path, capsys):
     with pytest.raises(SystemExit):
         real_benchmark.main(["--data", str(fake_data), "--out", str(tmp_path), "--repeats", "0"])
     assert "--repeats must be at least 1" in capsys.readouterr().err
+
+
+def test_machine_speed_times_the_yardstick():
+    # A module of its own: the fixture stubs the shared one's yardstick.
+    spec = importlib.util.spec_from_file_location("real_unstubbed", ROOT / "benchmarks/real.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert 0 < module.machine_speed(repeats=1) < 60
