@@ -336,12 +336,9 @@ def residual_table(rotations, translations, a_rows, b_rows, *, origins=None):
     table = None
     squares = [None] * d  # of the distances from the origins, by coordinate
     for i in order:
-        if d in _EINSUM_ORDER:
-            term = rotations[:, i, order[0], None] * a_rows[order[0]]
-            for j in order[1:]:
-                term += rotations[:, i, j, None] * a_rows[j]
-        else:
-            term = np.einsum("kj,jn->kn", rotations[:, i], a_rows)
+        term = rotations[:, i, order[0], None] * a_rows[order[0]]
+        for j in order[1:]:
+            term += rotations[:, i, j, None] * a_rows[j]
         term += translations[:, i, None]
         if origins is not None:
             squares[i] = np.square(term - origins[i])
