@@ -278,13 +278,14 @@ def moved_rows(rotations, translations, labels, a_rows):
     d = len(a_rows)
     order = _EINSUM_ORDER.get(d, tuple(range(d)))
     entries = np.asarray(rotations, dtype=float).reshape(-1, d * d).T  # (i, j): row i*d + j
+    shifts = np.asarray(translations, dtype=float).T
     moved = np.empty((d, len(labels)))
     for i in range(d):
         term = moved[i]
         np.multiply(entries[i * d + order[0]][labels], a_rows[order[0]], out=term)
         for j in order[1:]:
             term += entries[i * d + j][labels] * a_rows[j]
-        term += np.asarray(translations, dtype=float)[:, i][labels]
+        term += shifts[i][labels]
     return moved
 
 

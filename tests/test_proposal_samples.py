@@ -4,6 +4,7 @@ at least 4 rows, as propose_clusters gives)."""
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
 
 from mmreg._hypotheses import fit_minimal_samples
@@ -18,10 +19,12 @@ def one_group_at_a_time(a, b, members_of, n_hypotheses, rng, reference, turned):
     out = []
     for members in members_of:
         pa, pb = a[members], b[members]
-        samples = _local_samples(pa, n_hypotheses, 3, rng)
+        samples = _local_samples(pa, n_hypotheses, 3, rng, tree=cKDTree(pa))
         rotations, translations, _ = fit_minimal_samples(pa, pb, samples)
         if turned:
-            turn, shift = _local_translations(pa, pb, n_hypotheses, reference, rng)
+            turn, shift = _local_translations(
+                pa, pb, n_hypotheses, reference, rng, tree=cKDTree(pa)
+            )
             rotations = np.concatenate([rotations, turn])
             translations = np.concatenate([translations, shift])
         out.append((rotations, translations))

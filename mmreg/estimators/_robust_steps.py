@@ -889,16 +889,15 @@ def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
     return static, root, models, len(joined), slow
 
 
-def _local_samples(points, n_samples, size, rng, tree=None):
+def _local_samples(points, n_samples, size, rng, *, tree):
     """Minimal samples: a random seed and ``size - 1`` of its nearest neighbours.
 
     Nearby correspondences are the likeliest to share a motion, so local samples find
     a small object's motion among many others' far more often than uniform ones.
-    ``tree``, if given, is a k-d tree of ``points``.
+    ``tree``: a k-d tree of ``points``.
     """
     k_near = min(len(points), 9)
     seeds = rng.randint(len(points), size=n_samples)
-    tree = cKDTree(points) if tree is None else tree
     _, near = tree.query(points[seeds], k=k_near)
     near = np.asarray(near).reshape(n_samples, k_near)
     # Column 0 is the seed itself.
@@ -908,20 +907,19 @@ def _local_samples(points, n_samples, size, rng, tree=None):
     return np.column_stack([seeds, picks])
 
 
-def _local_translations(points, targets, n_samples, reference, rng, k=9, tree=None):
+def _local_translations(points, targets, n_samples, reference, rng, *, tree, k=9):
     """Hypotheses that turn like ``reference`` and shift by a neighbourhood's mean.
 
     Over the 0.1 s between two sweeps a pedestrian or a car turns little relative to the
     static world: the static world's rotation and the mean of ``b - R a`` over a random
     seed's ``k`` nearest neighbours is a motion hypothesis whose noise is averaged over
     ``k`` correspondences, where a three-point sample on a small object amplifies it.
-    ``tree``, if given, is a k-d tree of ``points``.
+    ``tree``: a k-d tree of ``points``.
     """
     d = points.shape[1]
     rotation = np.eye(d) if reference is None else reference[0]
     k = min(k, len(points))
     seeds = rng.randint(len(points), size=n_samples)
-    tree = cKDTree(points) if tree is None else tree
     _, near = tree.query(points[seeds], k=k)
     near = np.asarray(near).reshape(n_samples, k)
     shifts = (targets[near] - points[near] @ rotation.T).mean(axis=1)
@@ -944,7 +942,7 @@ def _sample_every_group(a, b, members_of, n_hypotheses, size, rng, reference, tu
     for members in members_of:
         pa = a[members]
         tree = cKDTree(pa)
-        drawn.append(members[_local_samples(pa, n_hypotheses, size, rng, tree)])
+        drawn.append(members[_local_samples(pa, n_hypotheses, size, rng, tree=tree)])
         if turned:
             shifts.append(
                 _local_translations(pa, b[members], n_hypotheses, reference, rng, tree=tree)
