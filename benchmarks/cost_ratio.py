@@ -22,6 +22,7 @@ and of the medians. The goal (issue 18) is at most 2x everywhere.
 """
 
 import argparse
+import functools
 import importlib.util
 import platform
 import sys
@@ -54,6 +55,7 @@ AV2_INPUTS = (
 )
 
 
+@functools.cache
 def _real_module():
     spec = importlib.util.spec_from_file_location("benchmark_real", HERE / "real.py")
     module = importlib.util.module_from_spec(spec)
