@@ -3,7 +3,7 @@ the distinct values of integer keys."""
 
 import numpy as np
 
-__all__ = ["sorted_within_groups", "unique_sorted"]
+__all__ = ["group_bounds", "sorted_within_groups", "unique_sorted"]
 
 
 def sorted_within_groups(values, groups, n_groups):
@@ -40,6 +40,45 @@ def sorted_within_groups(values, groups, n_groups):
     counts = np.bincount(groups, minlength=n_groups)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     return values[order], starts, counts
+
+
+def group_bounds(points, groups, n_groups):
+    """The bounding box of each group's points: ``low, high`` of shape (n_groups, d).
+
+    What ``np.minimum.at`` and ``np.maximum.at`` give (``inf`` and ``-inf`` for an empty
+    group), from one stable sort of the groups and one ``reduceat`` each: ``ufunc.at``
+    costs ten times as much at millions of points.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, d)
+    groups : ndarray of int of shape (n,)
+        Group of each point in ``0..n_groups-1``.
+    n_groups : int
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._grouping import group_bounds
+    >>> low, high = group_bounds(np.array([[0.0, 5], [2, 1], [9, 9]]), np.array([0, 0, 2]), 3)
+    >>> low.tolist(), high.tolist()
+    ([[0.0, 1.0], [inf, inf], [9.0, 9.0]], [[2.0, 5.0], [-inf, -inf], [9.0, 9.0]])
+    """
+    points = np.asarray(points, dtype=float)
+    groups = np.asarray(groups)
+    d = points.shape[1]
+    low = np.full((n_groups, d), np.inf)
+    high = np.full((n_groups, d), -np.inf)
+    counts = np.bincount(groups, minlength=n_groups)
+    full = np.flatnonzero(counts)
+    if not len(full):
+        return low, high
+    keys = groups.astype(np.int16) if n_groups <= np.iinfo(np.int16).max else groups
+    ordered = points[np.argsort(keys, kind="stable")]
+    starts = (np.cumsum(counts) - counts)[full]
+    low[full] = np.minimum.reduceat(ordered, starts, axis=0)
+    high[full] = np.maximum.reduceat(ordered, starts, axis=0)
+    return low, high
 
 
 def unique_sorted(values):

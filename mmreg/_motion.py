@@ -24,6 +24,7 @@ residual scale.
 
 import numpy as np
 
+from mmreg._geometry import moved_rows
 from mmreg._grouping import sorted_within_groups
 
 __all__ = [
@@ -80,6 +81,15 @@ def _group_median(values, groups, n_groups):
     high = starts[has] + counts[has] // 2
     median[has] = 0.5 * (sorted_values[low] + sorted_values[high])
     return median
+
+
+def _row_norms(rows):
+    """Euclidean norm of each column of ``rows`` (d, n), in place: the squares summed in
+    the order ``np.linalg.norm(..., axis=1)`` sums them over the rows of an (n, d) array."""
+    total = np.square(rows[0])
+    for row in rows[1:]:
+        total += np.square(row, out=row)
+    return np.sqrt(total, out=total)
 
 
 def motion_statistics(a, b, labels, rotations, translations, static):
@@ -145,9 +155,11 @@ def motion_statistics(a, b, labels, rotations, translations, static):
     if not n_clusters or not len(members):
         return displacement, scale
     group = labels[members]
-    pa = a[members]
-    own = np.einsum("nij,nj->ni", rotations[group], pa) + translations[group]
-    residual = np.linalg.norm(own - b[members], axis=1)
+    everyone = len(members) == len(a)  # no outliers: no copy of the rows
+    pa = a if everyone else a[members]
+    # Coordinates as rows: contiguous passes, and no (n, d, d) copy of the rotations.
+    own = moved_rows(rotations, translations, group, np.ascontiguousarray(pa.T))
+    residual = _row_norms(own - np.ascontiguousarray((b if everyone else b[members]).T))
 
     # Residual scale: RMS over the inliers (median + 3 robust sigmas), floored.
     median = _group_median(residual, group, n_clusters)
@@ -165,7 +177,7 @@ def motion_statistics(a, b, labels, rotations, translations, static):
         # einsum, not pa @ R.T: OpenBLAS threads make that product of a 3 x 3 matrix
         # 10-30x slower when the cores are busy.
         by_static = np.einsum("ij,kj->ik", pa, rotations[static]) + translations[static]
-        gap = np.linalg.norm(own - by_static, axis=1)
+        gap = _row_norms(own - np.ascontiguousarray(by_static.T))
         displacement = _group_median(gap, group, n_clusters)
         if np.isfinite(displacement[static]):
             displacement[static] = 0.0

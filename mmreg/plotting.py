@@ -160,10 +160,12 @@ def cluster_colors(labels, *, background="auto"):
     labels = np.asarray(labels)
     labels = _check_labels(labels, len(labels))
     table = _color_table(labels, background)
-    colors = np.empty((len(labels), 3))
+    # One gather from a palette indexed by label + 1 (row 0: the outliers' colour), not
+    # a pass over the points per cluster.
+    palette = np.zeros((max(table) + 2, 3))
     for label, color in table.items():
-        colors[labels == label] = color
-    return colors
+        palette[label + 1] = color
+    return palette[np.maximum(labels, -1) + 1]
 
 
 def _name(label, size, background_label, label_names, kind):

@@ -1,10 +1,11 @@
-"""Values sorted within groups, and the per-group medians built on that order."""
+"""Values sorted within groups, the per-group medians built on that order, and each
+group's bounding box."""
 
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mmreg._grouping import sorted_within_groups, unique_sorted
+from mmreg._grouping import group_bounds, sorted_within_groups, unique_sorted
 from mmreg.estimators._robust_steps import group_median
 
 
@@ -45,3 +46,22 @@ def test_unique_sorted_is_numpy_unique_of_the_sorted_values(values, repeat):
     expected, first = np.unique(np.sort(keys), return_index=True)
     np.testing.assert_array_equal(uniques, expected)
     np.testing.assert_array_equal(starts, first)
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.sampled_from([0, 1, 9, 600]),
+    n_groups=st.sampled_from([1, 4, 70, 40_000]),
+    d=st.sampled_from([2, 3]),
+)
+def test_group_bounds_are_those_of_ufunc_at(seed, n, n_groups, d):
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(n, d)) * 10.0 ** rng.integers(-3, 4)
+    groups = rng.integers(n_groups, size=n)
+    low, high = group_bounds(points, groups, n_groups)
+    expected_low = np.full((n_groups, d), np.inf)
+    expected_high = np.full((n_groups, d), -np.inf)
+    np.minimum.at(expected_low, groups, points)
+    np.maximum.at(expected_high, groups, points)
+    np.testing.assert_array_equal(low, expected_low)
+    np.testing.assert_array_equal(high, expected_high)

@@ -75,6 +75,20 @@ def test_colors_follow_cluster_size_not_label_value():
     np.testing.assert_allclose(cluster_colors(np.where(labels >= 0, labels + 100, -1)), colors)
 
 
+def test_colors_are_each_clusters_colour_in_the_table():
+    rng = np.random.default_rng(0)
+    labels = rng.integers(-1, 40, 5000)
+    labels[:100] = rng.integers(-9, -1, 100)  # any negative label is an outlier
+    colors = cluster_colors(labels, background=False)
+    assert np.all(colors[labels < 0] == OUTLIER_COLOR)
+    ids, sizes = np.unique(labels[labels >= 0], return_counts=True)
+    by_size = ids[np.lexsort((ids, -sizes))]
+    palette = cluster_palette(len(ids), background=False)
+    for rank, label in enumerate(by_size):
+        assert np.all(colors[labels == label] == palette[rank])
+    assert cluster_colors(np.array([], dtype=int)).shape == (0, 3)
+
+
 def test_auto_background_needs_a_clearly_largest_cluster():
     even = np.repeat([0, 1, 2], 10)
     assert not np.any(np.all(cluster_colors(even) == BACKGROUND_COLOR, axis=1))

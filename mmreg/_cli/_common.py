@@ -290,6 +290,8 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     import numpy as np
     import pandas as pd
 
+    from mmreg._geometry import moved_rows
+    from mmreg._grouping import group_bounds
     from mmreg._motion import motion_statistics, moving_from_statistics, static_cluster
 
     a, b = X[:, :3], X[:, 3:]
@@ -303,7 +305,7 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     clustered = np.flatnonzero(labels >= 0)
     group = labels[clustered]
     sizes = np.bincount(group, minlength=n_clusters)
-    own = np.einsum("nij,nj->ni", rotations[group], a[clustered]) + translations[group]
+    own = moved_rows(rotations, translations, group, np.ascontiguousarray(a[clustered].T)).T
     squared = np.sum((own - b[clustered]) ** 2, axis=1)
     frame = pd.DataFrame({"label": np.arange(n_clusters), "size": sizes})
     frame["fraction"] = sizes / max(len(labels), 1)
@@ -319,10 +321,7 @@ def summarize(X, labels, rotations, translations, sigmas=None):
         for axis, name in enumerate("xyz"):
             total = np.bincount(group, weights=a[clustered, axis], minlength=n_clusters)
             frame[f"centroid_{name}"] = np.where(sizes > 0, total / np.maximum(sizes, 1), np.nan)
-    low = np.full((n_clusters, 3), np.inf)
-    high = np.full((n_clusters, 3), -np.inf)
-    np.minimum.at(low, group, a[clustered])
-    np.maximum.at(high, group, a[clustered])
+    low, high = group_bounds(a[clustered], group, n_clusters)
     extent = np.where(sizes[:, None] > 0, high - low, np.nan)
     frame[["extent_x", "extent_y", "extent_z"]] = extent
     frame["background"] = frame["label"] == static
