@@ -284,18 +284,19 @@ def _point_size(n, point_size, view):
 def _arrow_ends(a, labels, motions, ids, relative_to):
     """Centroid of each cluster's a-points and where its motion takes it."""
     rotations, translations = (np.asarray(m, dtype=float) for m in motions)
-    starts, ends, kept = [], [], []
-    for label in ids:
-        if label < 0 or label >= len(rotations):
-            continue
-        center = a[labels == label].mean(axis=0)
-        end = rotations[label] @ center + translations[label]
-        if relative_to is not None:  # back into the first frame by the background's motion
-            end = rotations[relative_to].T @ (end - translations[relative_to])
-        starts.append(center)
-        ends.append(end)
-        kept.append(label)
-    return np.array(starts).reshape(-1, a.shape[1]), np.array(ends).reshape(-1, a.shape[1]), kept
+    ids = np.asarray(ids, dtype=np.intp)
+    kept = ids[(ids >= 0) & (ids < len(rotations))]
+    d = a.shape[1]
+    # Every centroid from one bincount per coordinate, not one pass per cluster.
+    rows = np.flatnonzero((labels >= 0) & (labels < len(rotations)))
+    group, k = labels[rows], len(rotations)
+    sizes = np.bincount(group, minlength=k)[kept]
+    sums = [np.bincount(group, weights=a[rows, axis], minlength=k) for axis in range(d)]
+    starts = np.column_stack(sums)[kept] / np.maximum(sizes, 1)[:, None]
+    ends = np.einsum("kij,kj->ki", rotations[kept], starts) + translations[kept]
+    if relative_to is not None:  # back into the first frame by the background's motion
+        ends = (ends - translations[relative_to]) @ rotations[relative_to]
+    return starts.reshape(-1, d), ends.reshape(-1, d), kept.tolist()
 
 
 def _new_axes(ax, view):
