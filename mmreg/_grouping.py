@@ -6,6 +6,14 @@ import numpy as np
 __all__ = ["group_bounds", "sorted_within_groups", "unique_sorted"]
 
 
+def _stable_group_order(groups, n_groups):
+    """The stable sort of ``groups`` (in ``0..n_groups-1``): a radix sort of 16-bit keys
+    for fewer than 32,768 groups."""
+    if n_groups <= np.iinfo(np.int16).max:
+        groups = groups.astype(np.int16)
+    return np.argsort(groups, kind="stable")
+
+
 def sorted_within_groups(values, groups, n_groups):
     """``values`` sorted by group and, within each group, by value.
 
@@ -33,10 +41,7 @@ def sorted_within_groups(values, groups, n_groups):
     (array([0., 1., 2., 3.]), array([0, 2, 4]), array([2, 2, 0]))
     """
     by_value = np.argsort(values)
-    keys = groups[by_value]
-    if n_groups <= np.iinfo(np.int16).max:
-        keys = keys.astype(np.int16)
-    order = by_value[np.argsort(keys, kind="stable")]
+    order = by_value[_stable_group_order(groups[by_value], n_groups)]
     counts = np.bincount(groups, minlength=n_groups)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     return values[order], starts, counts
@@ -73,8 +78,7 @@ def group_bounds(points, groups, n_groups):
     full = np.flatnonzero(counts)
     if not len(full):
         return low, high
-    keys = groups.astype(np.int16) if n_groups <= np.iinfo(np.int16).max else groups
-    ordered = points[np.argsort(keys, kind="stable")]
+    ordered = points[_stable_group_order(groups, n_groups)]
     starts = (np.cumsum(counts) - counts)[full]
     low[full] = np.minimum.reduceat(ordered, starts, axis=0)
     high[full] = np.maximum.reduceat(ordered, starts, axis=0)

@@ -286,17 +286,16 @@ def _arrow_ends(a, labels, motions, ids, relative_to):
     rotations, translations = (np.asarray(m, dtype=float) for m in motions)
     ids = np.asarray(ids, dtype=np.intp)
     kept = ids[(ids >= 0) & (ids < len(rotations))]
-    d = a.shape[1]
     # Every centroid from one bincount per coordinate, not one pass per cluster.
     rows = np.flatnonzero((labels >= 0) & (labels < len(rotations)))
     group, k = labels[rows], len(rotations)
     sizes = np.bincount(group, minlength=k)[kept]
-    sums = [np.bincount(group, weights=a[rows, axis], minlength=k) for axis in range(d)]
+    sums = [np.bincount(group, weights=a[rows, axis], minlength=k) for axis in range(a.shape[1])]
     starts = np.column_stack(sums)[kept] / np.maximum(sizes, 1)[:, None]
     ends = np.einsum("kij,kj->ki", rotations[kept], starts) + translations[kept]
     if relative_to is not None:  # back into the first frame by the background's motion
         ends = (ends - translations[relative_to]) @ rotations[relative_to]
-    return starts.reshape(-1, d), ends.reshape(-1, d), kept.tolist()
+    return starts, ends, kept.tolist()
 
 
 def _new_axes(ax, view):
