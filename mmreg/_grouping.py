@@ -3,7 +3,7 @@ the distinct values of integer keys."""
 
 import numpy as np
 
-__all__ = ["group_bounds", "sorted_within_groups", "unique_sorted"]
+__all__ = ["group_bounds", "group_centroids", "sorted_within_groups", "unique_sorted"]
 
 
 def _stable_group_order(groups, n_groups):
@@ -83,6 +83,34 @@ def group_bounds(points, groups, n_groups):
     low[full] = np.minimum.reduceat(ordered, starts, axis=0)
     high[full] = np.maximum.reduceat(ordered, starts, axis=0)
     return low, high
+
+
+def group_centroids(points, labels, n_groups):
+    """Centroid and size of every group ``0..n_groups-1`` (NaN centroid when empty).
+
+    Rows with a negative label are left out; one ``bincount`` per coordinate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._grouping import group_centroids
+    >>> centroids, sizes = group_centroids(np.array([[0.0, 0, 0], [2, 0, 0], [5, 5, 5]]),
+    ...                                    np.array([0, 0, 1]), 2)
+    >>> centroids.tolist(), sizes.tolist()
+    ([[1.0, 0.0, 0.0], [5.0, 5.0, 5.0]], [2, 1])
+    """
+    keep = labels >= 0
+    g = labels[keep]
+    sizes = np.bincount(g, minlength=n_groups)
+    sums = np.stack(
+        [
+            np.bincount(g, weights=points[keep, axis], minlength=n_groups)
+            for axis in range(points.shape[1])
+        ],
+        axis=1,
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return sums / sizes[:, None], sizes
 
 
 def unique_sorted(values):

@@ -25,8 +25,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
 
+from mmreg._grouping import group_centroids
 from mmreg._icp import subsample_groups
-from mmreg._islands import group_centroids
 from mmreg._motion import moving_clusters
 
 __all__ = ["choose_island_motions", "point_costs", "translation_starts"]

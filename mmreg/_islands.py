@@ -17,7 +17,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["group_centroids", "voxel_islands"]
+__all__ = ["voxel_islands"]
 
 # Voxel coordinates are packed into one int64 key, 21 bits per axis.
 _BITS = 21
@@ -103,26 +103,3 @@ def voxel_islands(points, cell, min_size=1):
     if kept.any():
         labels[kept] = remap[np.unique(component[kept], return_inverse=True)[1].ravel()]
     return labels, len(first)
-
-
-def group_centroids(points, labels, n_groups):
-    """Centroid and size of every group ``0..n_groups-1`` (NaN centroid when empty).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from mmreg._islands import group_centroids
-    >>> centroids, sizes = group_centroids(np.array([[0.0, 0, 0], [2, 0, 0], [5, 5, 5]]),
-    ...                                    np.array([0, 0, 1]), 2)
-    >>> centroids.tolist(), sizes.tolist()
-    ([[1.0, 0.0, 0.0], [5.0, 5.0, 5.0]], [2, 1])
-    """
-    keep = labels >= 0
-    g = labels[keep]
-    sizes = np.bincount(g, minlength=n_groups)
-    sums = np.stack(
-        [np.bincount(g, weights=points[keep, axis], minlength=n_groups) for axis in range(3)],
-        axis=1,
-    )
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return sums / sizes[:, None], sizes

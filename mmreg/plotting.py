@@ -20,6 +20,8 @@ Views (``view``):
 
 import numpy as np
 
+from mmreg._grouping import group_centroids
+
 __all__ = [
     "BACKGROUND_COLOR",
     "OUTLIER_COLOR",
@@ -286,12 +288,9 @@ def _arrow_ends(a, labels, motions, ids, relative_to):
     rotations, translations = (np.asarray(m, dtype=float) for m in motions)
     ids = np.asarray(ids, dtype=np.intp)
     kept = ids[(ids >= 0) & (ids < len(rotations))]
-    # Every centroid from one bincount per coordinate, not one pass per cluster.
-    rows = np.flatnonzero((labels >= 0) & (labels < len(rotations)))
-    group, k = labels[rows], len(rotations)
-    sizes = np.bincount(group, minlength=k)[kept]
-    sums = [np.bincount(group, weights=a[rows, axis], minlength=k) for axis in range(a.shape[1])]
-    starts = np.column_stack(sums)[kept] / np.maximum(sizes, 1)[:, None]
+    # Every centroid at once, not one pass over the points per cluster.
+    with_motion = np.where(labels < len(rotations), labels, -1)
+    starts = group_centroids(a, with_motion, len(rotations))[0][kept]
     ends = np.einsum("kij,kj->ki", rotations[kept], starts) + translations[kept]
     if relative_to is not None:  # back into the first frame by the background's motion
         ends = (ends - translations[relative_to]) @ rotations[relative_to]

@@ -1,11 +1,11 @@
 """Values sorted within groups, the per-group medians built on that order, and each
-group's bounding box."""
+group's bounding box and centroid."""
 
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mmreg._grouping import group_bounds, sorted_within_groups, unique_sorted
+from mmreg._grouping import group_bounds, group_centroids, sorted_within_groups, unique_sorted
 from mmreg.estimators._robust_steps import group_median
 
 
@@ -65,3 +65,27 @@ def test_group_bounds_are_those_of_ufunc_at(seed, n, n_groups, d):
     np.maximum.at(expected_high, groups, points)
     np.testing.assert_array_equal(low, expected_low)
     np.testing.assert_array_equal(high, expected_high)
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.sampled_from([1, 9, 300]),
+    n_groups=st.sampled_from([1, 4, 50]),
+    d=st.sampled_from([2, 3]),
+)
+def test_group_centroids_are_each_groups_mean(seed, n, n_groups, d):
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(n, d)) * 10.0 ** rng.integers(-3, 4)
+    labels = rng.integers(-1, n_groups, size=n)  # -1: in no group
+    centroids, sizes = group_centroids(points, labels, n_groups)
+    assert centroids.shape == (n_groups, d)
+    for g in range(n_groups):
+        members = points[labels == g]
+        assert sizes[g] == len(members)
+        if len(members):
+            # Summed in another order than numpy's mean: equal up to rounding at the
+            # members' own scale (a mean near 0 has no relative precision).
+            scale = np.abs(members).max()
+            np.testing.assert_allclose(centroids[g], members.mean(axis=0), atol=1e-12 * scale)
+        else:
+            assert np.isnan(centroids[g]).all()

@@ -291,7 +291,7 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     import pandas as pd
 
     from mmreg._geometry import moved_rows
-    from mmreg._grouping import group_bounds
+    from mmreg._grouping import group_bounds, group_centroids
     from mmreg._motion import motion_statistics, moving_from_statistics, static_cluster
 
     a, b = X[:, :3], X[:, 3:]
@@ -318,9 +318,8 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     with np.errstate(invalid="ignore", divide="ignore"):
         sums = np.bincount(group, weights=squared, minlength=n_clusters)
         frame["rms_residual"] = np.where(sizes > 0, np.sqrt(sums / np.maximum(sizes, 1)), np.nan)
-        for axis, name in enumerate("xyz"):
-            total = np.bincount(group, weights=a[clustered, axis], minlength=n_clusters)
-            frame[f"centroid_{name}"] = np.where(sizes > 0, total / np.maximum(sizes, 1), np.nan)
+    centroids, _ = group_centroids(a, labels, n_clusters)
+    frame[["centroid_x", "centroid_y", "centroid_z"]] = centroids
     low, high = group_bounds(a[clustered], group, n_clusters)
     extent = np.where(sizes[:, None] > 0, high - low, np.nan)
     frame[["extent_x", "extent_y", "extent_z"]] = extent
