@@ -23,6 +23,7 @@ from sklearn.utils.validation import validate_data
 
 from mmreg._deskew import deskew, relative_motions
 from mmreg._flow import rigid_flow
+from mmreg._grouping import group_bounds
 from mmreg._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg._island_motions import choose_island_motions, translation_starts
 from mmreg._islands import voxel_islands
@@ -536,10 +537,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         # (the rounds move them far less).
         moved = np.einsum("nij,nj->ni", R[g], a[member]) + t[g]
         margin = 2 * self.max_distance
-        low = np.full((n_part, 3), np.inf)
-        high = np.full((n_part, 3), -np.inf)
-        np.minimum.at(low, g, moved)
-        np.maximum.at(high, g, moved)
+        low, high = group_bounds(moved, g, n_part)
         local = np.flatnonzero(_in_boxes(sweep, low - margin, high + margin))
         if not len(local):  # nothing to match: the ICP leaves the motions as they are
             return multi_body_icp(a, group, R, t, sweep, max_distance=self.max_distance, max_iter=0)
