@@ -32,9 +32,9 @@ from mmreg._motion import _group_median
 __all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
 
 _MAD_TO_SIGMA = 1.4826
-# Damping of the normal equations, relative to their mean diagonal: small enough to leave
-# a well-constrained step unchanged, large enough to keep unconstrained directions still.
-_DAMPING = 1e-8
+# Directions of the step whose curvature is below this share of the largest are left
+# unchanged (see _constrained_step).
+_DEGENERATE = 1e-3
 # A cluster needs this many matched points to move (6 unknowns, and a margin).
 _MIN_MATCHES = 12
 # The kernel's scale shrinks by this factor per iteration until it reaches the robust one.
@@ -176,6 +176,29 @@ class ICPResult:
     """Share of every cluster's points within the kernel's support, ``(K,)``."""
     n_iter: int
     converged: bool
+
+
+def _constrained_step(hessian, gradient, spread):
+    """Gauss-Newton steps ``(K, 6)`` in the directions the matches constrain.
+
+    A planar face constrains only its normal translation and two rotations; along its
+    plane the normal equations are near singular and their solution follows the noise
+    (a patch of road or a car's rear slides along itself, tens of metres over an ICP's
+    iterations). As in Zhang, Kaess and Singh's solution remapping ("On Degeneracy of
+    Optimization-based State Estimation Problems", ICRA 2016), the step is solved in the
+    eigenvectors of the Hessian and set to zero along those whose eigenvalue is below
+    ``_DEGENERATE`` of the largest: the motion stays where it started there. The
+    rotation is measured by how far it moves the points (times ``spread``, their RMS
+    distance from the centroid), so the eigenvalues of turns and shifts compare in the
+    units of the points, whatever those are.
+    """
+    scale = np.ones((len(hessian), 6))
+    scale[:, :3] = 1.0 / np.maximum(spread, 1e-300)[:, None]
+    values, vectors = np.linalg.eigh(hessian * scale[:, :, None] * scale[:, None, :])
+    keep = values >= _DEGENERATE * values[:, -1:]
+    inverse = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
+    along = np.einsum("kji,kj->ki", vectors, gradient * scale) * inverse
+    return -np.einsum("kij,kj->ki", vectors, along) * scale
 
 
 def multi_body_icp(
@@ -330,21 +353,26 @@ def multi_body_icp(
         gradient = _group_sums(weighted * residual[:, None], g, n_clusters)
         diagonal = np.einsum("kii->k", hessian) / 6
         active = (n_matched >= _MIN_MATCHES) & (diagonal > 0)
-        hessian += (_DAMPING * diagonal + 1e-300)[:, None, None] * np.eye(6)
+        spread = np.sqrt(
+            _group_sums(np.sum(lever**2, axis=1)[:, None], g, n_clusters)[:, 0]
+            / np.maximum(n_matched, 1)
+        )
         step = np.zeros((n_clusters, 6))
         if active.any():
-            step[active] = -np.linalg.solve(hessian[active], gradient[active][:, :, None])[:, :, 0]
+            step[active] = _constrained_step(hessian[active], gradient[active], spread[active])
+        change = np.linalg.norm(step[:, 3:], axis=1) + np.linalg.norm(step[:, :3], axis=1) * spread
+        # A trust region: the matches hold within the gate, so no step moves a cluster's
+        # points farther. Where the points constrain a direction weakly (a planar face
+        # slides along itself), the damped solve would otherwise run away with it.
+        shrink = np.minimum(1.0, gate / np.maximum(change, 1e-300))
+        step *= shrink[:, None]
+        change *= shrink
         turn = rotation_vectors_to_matrices(step[:, :3])
         # x -> turn (x - c) + c + v, composed with the current motion.
         rotations = turn @ rotations
         translations = (
             np.einsum("kij,kj->ki", turn, translations - centroid) + centroid + step[:, 3:]
         )
-        spread = np.sqrt(
-            _group_sums(np.sum(lever**2, axis=1)[:, None], g, n_clusters)[:, 0]
-            / np.maximum(n_matched, 1)
-        )
-        change = np.linalg.norm(step[:, 3:], axis=1) + np.linalg.norm(step[:, :3], axis=1) * spread
         n_iter = iteration + 1
         alive &= change > tol
         converged = not alive.any()

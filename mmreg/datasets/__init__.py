@@ -15,6 +15,7 @@ from mmreg.datasets._flow_noise import corrupt_scene_flow
 from mmreg.datasets._flying_things import PRIMITIVES, make_flying_things
 from mmreg.datasets._flying_things_data import load_flying_things
 from mmreg.datasets._kitti import load_kitti_scene_flow
+from mmreg.datasets._lidar import make_lidar_sweeps
 from mmreg.datasets._meshes import MESH_NAMES, load_mesh_points
 from mmreg.datasets._pfm import read_pfm, write_pfm
 from mmreg.datasets._sam import simulate_sam_masks
@@ -38,6 +39,7 @@ __all__ = [
     "load_kitti_scene_flow",
     "load_mesh_points",
     "make_flying_things",
+    "make_lidar_sweeps",
     "make_scene",
     "make_street",
     "read_pfm",

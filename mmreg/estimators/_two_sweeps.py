@@ -23,6 +23,7 @@ from sklearn.utils.validation import validate_data
 
 from mmreg._deskew import deskew, relative_motions
 from mmreg._flow import rigid_flow
+from mmreg._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
 from mmreg._grouping import group_bounds
 from mmreg._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg._island_motions import choose_island_motions, translation_starts
@@ -44,6 +45,10 @@ _HYPOTHESIS_ITER = 15
 # ICP has converged when no step moves a cluster by more than this share of max_distance.
 _TOL = 1e-4
 _BIN = 0.25
+# Raw mode: a cluster whose motion moves its points off their own surfaces (relative to
+# the static world) by fewer than this many of the ego ICP's robust residual scales only
+# slides along them (see _join_slides).
+_SLIDE_SCALES = 3.0
 # Refinement mode with capture times: rounds of deskewing (with the last round's motions)
 # and ICP.
 _DESKEW_ROUNDS = 2
@@ -97,6 +102,61 @@ def _check_timing(times, sweep_times, interval, n, m):
     if not np.isfinite(interval) or interval <= 0:
         raise ValueError(f"interval must be a finite number of seconds > 0; got {interval}.")
     return _check_times(times, n, "times"), _check_times(sweep_times, m, "sweep_times"), interval
+
+
+def _join_slides(a, labels, motions, static, sigma):
+    """The static world takes back every cluster that only slides along its own surfaces.
+
+    A planar patch (a wall, a kerb, a strip of road) constrains only motion along its
+    normals: an ICP slides it along itself at no cost, and the slide reads as motion.
+    What shows that a cluster moved is how far its motion carries its points off their
+    own surfaces relative to the static world's motion: the RMS, over its points, of the
+    displacement ``M_k a - E a`` along each point's normal (PCA of its 10 nearest
+    points of the first sweep). Below 3 robust residual scales of the ego-motion ICP
+    (``sigma``, the same point-to-plane residual) the data cannot tell the cluster from
+    the static world: it joins it, with the static world's motion.
+
+    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; returns the
+    labels, the same arrays without the joined clusters, and the static world's new
+    index.
+    """
+    rotations, translations = motions[:2]
+    others = np.flatnonzero((labels >= 0) & (labels != static))
+    if not len(others):
+        return labels, motions, static
+    tree = cKDTree(a)
+    normals, _, _ = SurfaceNormals(a, tree, 10)(others)
+    group = labels[others]
+    points = a[others]
+    displacement = (
+        np.einsum("nij,nj->ni", rotations[group], points)
+        + translations[group]
+        - (points @ rotations[static].T + translations[static])
+    )
+    along = np.einsum("ni,ni->n", np.nan_to_num(normals), displacement)
+    n_clusters = len(rotations)
+    counts = np.maximum(np.bincount(group, minlength=n_clusters), 1)
+    evidence = np.sqrt(np.bincount(group, weights=along**2, minlength=n_clusters) / counts)
+    slides = np.bincount(group, minlength=n_clusters) > 0
+    slides &= evidence < _SLIDE_SCALES * sigma
+    if not slides.any():
+        return labels, motions, static
+    kept = ~slides
+    index = np.cumsum(kept) - 1
+    labels = np.where(labels >= 0, labels, -1)
+    labels = np.where(slides[np.maximum(labels, 0)] & (labels >= 0), static, labels)
+    labels = np.where(labels >= 0, index[np.maximum(labels, 0)], -1)
+    return labels, tuple(values[kept] for values in motions), int(index[static])
+
+
+def _check_mask(mask, n, name):
+    """A boolean mask of n points; a clear ValueError otherwise."""
+    mask = np.asarray(mask)
+    if mask.dtype != bool:
+        raise TypeError(f"{name} must be a boolean mask (one bool per point); got {mask.dtype}.")
+    if mask.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},), one bool per point; got {mask.shape}.")
+    return mask
 
 
 def _check_sweep(sweep, d):
@@ -186,6 +246,19 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         one); the same clusters as a Euclidean clustering on the shared Argoverse 2
         pairs in half the time, and the only way for the slow movers, which share
         islands with the static world, to start apart. ``"estimator"``: its own ``init``.
+    ground : {"auto", "keep"}, default="auto"
+        Raw mode: what to do with the ground of the sweeps. ``"auto"``: when the first
+        sweep is z-up (it spreads far wider than it is tall, see
+        :func:`mmreg._ground.is_z_up_sweep`), the ground of both sweeps is found
+        (Patchwork++, in the units of the estimator's ``tau``; or the masks given to
+        ``fit``) and given to the static world: the ego-motion ICP uses it (it holds roll,
+        pitch and height), the islands, hypotheses and object ICPs leave it out (a patch
+        of road slides along itself and would look like a moving object), and its points
+        take the static world's label and motion. A sweep whose ground was removed
+        before, or a scene without one, is registered as it is (the ground found must
+        hold 6 % of the points and surround the sensor, see
+        :func:`mmreg._ground.has_ground`). ``"keep"``: the ground is registered like every other
+        point.
     random_state : int, RandomState instance or None, default=None
         Seeds the subsampling and an ``estimator`` whose ``random_state`` is None.
 
@@ -220,6 +293,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         The fitted ``estimator`` (last round).
     ego_motion_ : tuple of ndarray
         Raw mode: ``(R, t)`` of the ego-motion ICP.
+    ground_mask_ : ndarray of shape (n_samples,) or None
+        Raw mode: which points of the first sweep were taken for the ground (all in the
+        static world); None when the ground was kept.
+    sweep_ground_mask_ : ndarray of shape (m,) or None
+        The same for the second sweep.
     n_rounds_ : int
         Rounds of estimator and ICP run (1 in refinement mode).
     n_features_in_ : int
@@ -300,6 +378,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         "max_displacement": [Interval(Real, 0, None, closed="neither")],
         "max_rounds": [Interval(Integral, 1, None, closed="left")],
         "raw_init": [StrOptions({"islands", "estimator"})],
+        "ground": [StrOptions({"auto", "keep"})],
         "random_state": ["random_state"],
     }
 
@@ -316,6 +395,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         max_displacement=3.0,
         max_rounds=2,
         raw_init="islands",
+        ground="auto",
         random_state=None,
     ):
         self.estimator = estimator
@@ -328,6 +408,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.max_displacement = max_displacement
         self.max_rounds = max_rounds
         self.raw_init = raw_init
+        self.ground = ground
         self.random_state = random_state
 
     def _make_estimator(self, random_state, init=None):
@@ -345,7 +426,18 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         return estimator
 
     @_fit_context(prefer_skip_nested_validation=False)
-    def fit(self, X, y=None, *, sweep=None, times=None, sweep_times=None, interval=None):
+    def fit(
+        self,
+        X,
+        y=None,
+        *,
+        sweep=None,
+        times=None,
+        sweep_times=None,
+        interval=None,
+        ground=None,
+        sweep_ground=None,
+    ):
         """Find the objects and their motions, refined on the second sweep.
 
         Parameters
@@ -368,6 +460,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         interval : float or None
             Seconds between the two sweeps' reference times (Argoverse 2: the difference
             of the two timestamps, about 0.1 s).
+        ground, sweep_ground : array-like of shape (n_samples,) and (m,), bool, or None
+            Raw mode: the known ground points of each sweep (e.g. from a map: Argoverse 2
+            takes points within 0.3 m of its ground height raster). Given together, they
+            replace the segmentation of ``ground="auto"``; see ``ground``.
 
         Returns
         -------
@@ -382,6 +478,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 "the second sweep too, fit(X, sweep=points2, times=..., sweep_times=..., "
                 "interval=...)."
             )
+        if sweep is None and (ground is not None or sweep_ground is not None):
+            raise ValueError("ground and sweep_ground go with two raw sweeps: pass sweep too.")
         if sweep is None and X.shape[1] % 2 == 0:
             # Without a second sweep there is nothing to refine on: the estimator's result.
             estimator = self._make_estimator(rng).fit(X)
@@ -392,6 +490,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             self.icp_scales_ = np.full(len(rotations), np.nan)
             self._copy_estimator_state(estimator)
             self.moving_ = moving
+            self.ground_mask_ = self.sweep_ground_mask_ = None
             return self
         if X.shape[1] not in (3, 6):
             raise ValueError(
@@ -400,6 +499,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             )
         sweep = _check_sweep(sweep, 3)
         timing = _check_timing(times, sweep_times, interval, len(X), len(sweep))
+        if X.shape[1] == 6 and (ground is not None or sweep_ground is not None):
+            raise ValueError(
+                "ground and sweep_ground are for two raw sweeps (X of shape (n, 3)); with "
+                "correspondences the estimator's static world holds the ground."
+            )
+        self.ground_mask_ = self.sweep_ground_mask_ = None
         a = X[:, :3]
         tree = cKDTree(sweep)
         normals = SurfaceNormals(sweep, tree, 10)
@@ -413,11 +518,17 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             )
             self.n_rounds_ = 1
         else:
-            labels, estimator, rotations, translations, scales, static = self._raw(a, context)
+            masks = self._ground_masks(a, sweep, ground, sweep_ground)
+            labels, estimator, rotations, translations, scales, sigmas, static = (
+                self._raw_with_ground(a, context, masks)
+            )
         self.estimator_ = estimator
         self.icp_scales_ = scales
         self._copy_estimator_state(estimator)
         self._store(a, labels, rotations, translations, static)
+        if X.shape[1] == 3:  # clusters joined or added for the ground are not the estimator's
+            self.outlier_mask_ = labels < 0
+            self.sigmas_ = sigmas
         self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
         return self
 
@@ -597,15 +708,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             rotation, translation = result.rotations, result.translations
         return (rotation[0], translation[0]), float(result.scales[0])
 
-    def _island_motions(self, a, context):
+    def _island_motions(self, a, context, ego, sigma):
         """Every island's motion: the ego motion unless another one clearly explains it.
 
-        Returns the islands of the first sweep, their rotations and translations, and
-        whether each moves relative to the ego motion.
+        ``ego`` and ``sigma`` are the ego motion and its residual scale. Returns the
+        islands of the first sweep, their rotations and translations, and whether each
+        moves relative to the ego motion.
         """
         sweep, tree, normals, rng, _ = context
-        ego, sigma = self._ego_motion(a, context)
-        self.ego_motion_ = ego
         islands, n_islands = voxel_islands(a, self.island_radius, self.min_island_size)
         islands2, n_islands2 = voxel_islands(sweep, self.island_radius, self.min_island_size)
         starts = translation_starts(
@@ -693,10 +803,84 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             moving = np.concatenate([moving, np.ones(len(slow_rotations), dtype=bool)])
         return islands, rotations, translations, moving
 
-    def _raw(self, a, context):
+    def _length_scale(self):
+        """The estimator's ``tau``, the one length the user gives (5 stands for metres)."""
+        tau = None
+        if self.estimator is not None:
+            tau = self.estimator.get_params(deep=False).get("tau")
+        return float(tau) if isinstance(tau, Real) and not isinstance(tau, bool) else METRE_TAU
+
+    def _ground_masks(self, a, sweep, ground, sweep_ground):
+        """The ground of both sweeps: the masks given, found, or None (kept)."""
+        if (ground is None) != (sweep_ground is None):
+            raise ValueError(
+                "ground and sweep_ground go together: the known ground points of both sweeps."
+            )
+        if ground is not None:
+            if self.ground == "keep":
+                raise ValueError(
+                    "ground masks were given with ground='keep'; pass ground='auto' to use "
+                    "them, or leave them out."
+                )
+            return _check_mask(ground, len(a), "ground"), _check_mask(
+                sweep_ground, len(sweep), "sweep_ground"
+            )
+        if self.ground == "keep" or not is_z_up_sweep(a):
+            return None
+        tau = self._length_scale()
+        ground = ground_mask(a, tau)
+        if not has_ground(a, ground):  # removed before: its remnants are objects' bottoms
+            return None
+        return ground, ground_mask(sweep, tau)
+
+    def _raw_with_ground(self, a, context, masks):
+        """Two raw sweeps: the ego motion on everything, the objects off the ground.
+
+        The ego-motion ICP aligns the whole sweeps (the ground holds roll, pitch and
+        height); the islands, their hypotheses, the estimator and the object ICPs see the
+        points off the ground of both sweeps; the ground joins the static world.
+        """
+        ego, sigma = self._ego_motion(a, context)
+        self.ego_motion_ = ego
+        if masks is None:
+            return self._raw(a, context, ego, sigma)
+        ground, sweep_ground = masks
+        self.ground_mask_, self.sweep_ground_mask_ = ground, sweep_ground
+        sweep, _, _, rng, timing = context
+        off, sweep_off = ~ground, ~sweep_ground
+        if off.sum() < 3 or sweep_off.sum() < _MIN_SWEEP_POINTS:
+            raise ValueError(
+                f"{ground.sum()} of {len(a)} points of the first sweep and "
+                f"{sweep_ground.sum()} of {len(sweep)} of the second were taken for the "
+                "ground, leaving too few to register; pass ground='keep'."
+            )
+        sweep_off_points = sweep[sweep_off]
+        tree = cKDTree(sweep_off_points)
+        if timing is not None:
+            timing = (timing[0][off], timing[1][sweep_off], timing[2])
+        context = (
+            sweep_off_points,
+            tree,
+            SurfaceNormals(sweep_off_points, tree, 10),
+            rng,
+            timing,
+        )
+        labels_off, estimator, rotations, translations, scales, sigmas, static = self._raw(
+            a[off], context, ego, sigma
+        )
+        if static < 0:  # the ground is the static world's first member
+            static = len(rotations)
+            rotations = np.concatenate([rotations, ego[0][None]])
+            translations = np.concatenate([translations, ego[1][None]])
+            scales = np.concatenate([scales, [np.nan]])
+            sigmas = np.concatenate([sigmas, [np.nan]])
+        labels = np.full(len(a), static, dtype=labels_off.dtype)
+        labels[off] = labels_off
+        return labels, estimator, rotations, translations, scales, sigmas, static
+
+    def _raw(self, a, context, ego, sigma):
         sweep, tree, normals, rng, _ = context
-        islands, rotations, translations, _ = self._island_motions(a, context)
-        ego = self.ego_motion_
+        islands, rotations, translations, _ = self._island_motions(a, context, ego, sigma)
         # Label 0: the ego motion, for the small islands and every static one.
         motions = (
             np.concatenate([ego[0][None], rotations]),
@@ -725,7 +909,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             if previous is not None and np.array_equal(previous, labels):
                 break
             previous = labels
-        return labels, estimator, rotations, translations, scales, static
+        sigmas = np.asarray(getattr(estimator, "sigmas_", np.full(len(rotations), np.nan)))
+        if static >= 0:
+            labels, (rotations, translations, scales, sigmas), static = _join_slides(
+                a, labels, (rotations, translations, scales, sigmas), static, sigma
+            )
+        return labels, estimator, rotations, translations, scales, sigmas, static
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
