@@ -989,7 +989,13 @@ def read_correspondences(path, *, target=None, flow=None):
     points_only = suffix in _CLOUD_EXTENSIONS or _lidar_files.lidar_kind(path) is not None
     if not points_only and suffix in _ARRAY_EXTENSIONS and (target, flow) != (None, None):
         # An (n, 3) array is a-points (with target= or flow=), an (n, 6) one both.
-        points_only = _array_columns(path, suffix) == 3
+        columns = _array_columns(path, suffix)
+        if columns not in (3, 6):
+            raise ValueError(
+                f"{path}: target= and flow= need the a-points as an (n, 3) array; this one "
+                f"has {'no 2-D shape' if columns is None else f'{columns} columns'}."
+            )
+        points_only = columns == 3
     if points_only:
         if (target is None) == (flow is None):
             raise ValueError(
