@@ -132,10 +132,10 @@ def _read_feather_sweep(path):
     return points.reshape(-1, 3), times, intensity
 
 
-def av2_timestamp(path):
-    """Seconds of an Argoverse 2 sweep named ``<timestamp_ns>.feather``, else None."""
+def av2_timestamp_ns(path):
+    """Nanoseconds of an Argoverse 2 sweep named ``<timestamp_ns>.feather``, else None."""
     name = Path(path).name
-    return int(name.split(".")[0]) * 1e-9 if _AV2_SWEEP_NAME.match(name) else None
+    return int(name.split(".")[0]) if _AV2_SWEEP_NAME.match(name) else None
 
 
 # --------------------------------------------------------------------------- ROS bags

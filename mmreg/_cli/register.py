@@ -353,7 +353,8 @@ def _read_sequence_input(args, other):
     sequence, first, second = read_frames(args)
     args.sweep_points = second.points
     args.input_times, args.sweep_file_times = first.times, second.times
-    args.sweep_interval = interval_between(first.timestamp, second.timestamp, args.input)
+    if args.interval is None:
+        args.sweep_interval = interval_between(first.timestamp, second.timestamp, args.input)
     args.frames = {"frame": first.index, "topic": getattr(sequence, "topic", None)}
     args.frames["sources"] = [first.source, second.source]
     a = _check_size(first.points, args)
@@ -480,8 +481,15 @@ def read_sweep(args):
         raise CLIError("--sweep refines the default variant's motions; drop --paper")
     with reading(sweep):
         points, args.sweep_file_times = mmio.read_point_cloud(sweep, times=True)
-    stamps = [_lidar_files.av2_timestamp(p) for p in (args.input, sweep)]
-    args.sweep_interval = interval_between(*stamps, sweep)
+    # Two Argoverse 2 sweeps: the seconds between them from their names, in integer ns.
+    first, second = (_lidar_files.av2_timestamp_ns(p) for p in (args.input, sweep))
+    if first is not None and second is not None and getattr(args, "interval", None) is None:
+        if second <= first:
+            raise CLIError(
+                f"{sweep}: its timestamp ({second} ns) is not after that of {args.input} "
+                f"({first} ns); give --interval"
+            )
+        args.sweep_interval = (second - first) * 1e-9
     return points
 
 
