@@ -6,7 +6,8 @@ A result directory (written by ``mmreg register`` and ``mmreg demo --out``) hold
 * ``motions.json``: per cluster its label, 4 x 4 ``transform``, ``rotation``,
   ``translation``, ``rotation_angle_deg``, ``sigma``, ``size`` and ``moving``;
 * ``summary.csv``: one row per cluster (see :func:`summarize`);
-* ``clusters.ply``: the a-points coloured by cluster, outliers grey;
+* ``clusters.ply``: the a-points coloured by cluster, outliers grey, and each point's
+  cluster as an int property ``label`` (-1 for outliers);
 * ``result.png``: the picture;
 * ``X.npy``: the input correspondences ``[a | b]``, only on request (``mmreg register
   --save-input``) or when there is no input file (``mmreg demo``);
@@ -609,7 +610,7 @@ def write_result_dir(
         )
         summary.to_csv(staging / "summary.csv", index=False, float_format="%.6g")
         colors = cluster_colors(labels, background=True)  # as in the picture
-        mmio.write_point_cloud(staging / "clusters.ply", X[:, :3], colors=colors)
+        mmio.write_point_cloud(staging / "clusters.ply", X[:, :3], colors=colors, labels=labels)
         (staging / "result.png").write_bytes(png)
         if save_input:
             np.save(staging / "X.npy", X)

@@ -71,7 +71,8 @@ of each a-point in that image).
 Written into --out: labels.npy (cluster of every correspondence, -1 for outliers),
 motions.json (per cluster: label, 4x4 transform with b = R a + t, rotation, translation,
 rotation_angle_deg, sigma, size, moving), summary.csv (one row per cluster), clusters.ply
-(a-points coloured by cluster, outliers grey), result.png and run.json (input, options,
+(a-points coloured by cluster, outliers grey, and an int property 'label' per point: the
+cluster, -1 for outliers, a scalar field in CloudCompare), result.png and run.json (input, options,
 timings, and the input's absolute path and SHA-256, from which 'mmreg view' and 'mmreg
 evaluate' read it again); with --save-input also X.npy, a copy of the correspondences.
 The directory is written whole or not at all.
