@@ -649,20 +649,60 @@ def correspondences_digest(X):
     return hashlib.sha256(np.ascontiguousarray(X, dtype=np.float64).data).hexdigest()
 
 
+def file_digest(path):
+    """The SHA-256 (hex) of a file's bytes, read in chunks."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+# The input files a result may be read again from, by their run.json keys and options.
+_INPUT_FILES = (("input", "INPUT"), ("target", "--target"), ("flow", "--flow"))
+
+
 def input_record(X, input, target=None, flow=None):
-    """What ``run.json`` keeps of an input file to read it again: absolute paths, digest."""
+    """What ``run.json`` keeps of an input file to read it again: absolute paths, digests.
+
+    ``input_sha256`` is the digest of the correspondences read, ``files_sha256`` that of
+    each file's bytes (so that a changed file can be named, see :func:`read_result_input`).
+    """
     paths = {"input": input, "target": target, "flow": flow}
     record = {f"{name}_path": str(Path(path).resolve()) for name, path in paths.items() if path}
-    return record | {"input_sha256": correspondences_digest(X)}
+    files = {name: file_digest(path) for name, path in paths.items() if path}
+    return record | {"input_sha256": correspondences_digest(X), "files_sha256": files}
+
+
+def _changed_inputs(run, folder):
+    """The input files of ``run`` that are missing or differ from what was recorded.
+
+    Returns ``(missing, changed)``: lists of paths. ``changed`` is empty when the record
+    has no per-file digests (results of older versions).
+    """
+    missing, changed = [], []
+    recorded = run.get("files_sha256") or {}
+    for name, _ in _INPUT_FILES:
+        path = run.get(f"{name}_path")
+        if not path:
+            continue
+        if not Path(path).is_file():
+            missing.append(path)
+        elif name in recorded and file_digest(path) != recorded[name]:
+            changed.append(path)
+    return missing, changed
 
 
 def read_result_input(folder, n, *, required=True):
-    """The correspondences of a result directory: its ``X.npy``, else its input file.
+    """The correspondences of a result directory: its ``X.npy``, else its input files.
 
     Without ``X.npy`` the input is read again from the paths in ``run.json`` and must
     still hold the same correspondences (its SHA-256). Returns None when the result
     keeps neither and ``required`` is False; otherwise that, a missing, changed or
-    unreadable input, or a length other than ``n`` is a CLIError.
+    unreadable input, or a length other than ``n`` is a CLIError of one line that names
+    the file at fault (the cloud, its ``--target`` or its ``--flow``).
     """
     folder = Path(folder)
     saved = folder / "X.npy"
@@ -684,14 +724,27 @@ def read_result_input(folder, n, *, required=True):
             )
         from mmreg import io as mmio
 
-        source, target, flow = (run.get(f"{k}_path") for k in ("input", "target", "flow"))
+        again = "run 'mmreg register' again (--save-input keeps a copy in the result)"
+        missing, changed = _changed_inputs(run, folder)
+        if missing:
+            raise CLIError(
+                f"{missing[0]}: no such file; {folder} was computed from it (moved or "
+                f"deleted since?): put it back, or {again}"
+            )
+        if changed:
+            raise CLIError(
+                f"{changed[0]}: changed since {folder} was computed from it; put the "
+                f"original back, or {again}"
+            )
+        source, target, flow = (run.get(f"{k}_path") for k, _ in _INPUT_FILES)
         with reading(source, target, flow):
             X = mmio.read_correspondences(source, target=target, flow=flow)
         X = check_correspondences(X, source)
         if correspondences_digest(X) != run.get("input_sha256"):
+            named = " or ".join(str(p) for p in (source, target, flow) if p)
             raise CLIError(
-                f"{source}: not the correspondences {folder} was computed from (the file "
-                "changed since); run 'mmreg register' again (--save-input keeps a copy)"
+                f"{named}: not the correspondences {folder} was computed from (changed "
+                f"since); {again}"
             )
     if len(X) != n:
         raise CLIError(f"{source}: {len(X)} correspondences for {n} labels")
