@@ -1,6 +1,7 @@
 """``mmreg view`` and ``mmreg evaluate`` on what ``mmreg run`` writes, and on sweep results."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -127,6 +128,18 @@ def test_evaluate_every_job_of_a_sweep_run_against_its_datasets_truth(tmp_path, 
         args = (truth[keep], arrays["labels"][keep], true, pred)
         assert row["rotation_error_deg"] == pytest.approx(rotation_error(*args))
         assert row["translation_error"] == pytest.approx(translation_error(*args))
+    # A job that used some rows of its sweep only names them (indices): read by them.
+    subset = tmp_path / "subset"
+    shutil.copytree(out, subset)
+    path = subset / "jobs" / f"{jobs[0].name}.npz"
+    arrays = dict(np.load(path))
+    rows_used = np.arange(0, len(arrays["labels"]), 2)
+    for key in ("labels", "flow"):
+        arrays[key] = arrays[key][rows_used]
+    np.savez(path, **arrays, indices=rows_used)
+    scores, _ = _json(capsys, "evaluate", str(path))
+    assert scores["iou"] == 1.0 and scores["epe3d"] < 0.1
+    assert main(["view", str(path), "--out", str(tmp_path / "subset.png")]) == 0
     capsys.readouterr()
     assert main(["evaluate", str(out)]) == 0
     table = capsys.readouterr().out.splitlines()
