@@ -274,7 +274,38 @@ def background_label(labels):
     return None if label < 0 else label
 
 
-def summarize(X, labels, rotations, translations, sigmas=None):
+def _robust_rms(residual, group, n_clusters):
+    """Per group, the RMS of its inliers (median + 3 robust standard deviations)."""
+    import numpy as np
+
+    from mmreg._motion import _INLIER_SIGMAS, _MAD_TO_SIGMA, _group_median
+
+    median = _group_median(residual, group, n_clusters)
+    mad = _group_median(np.abs(residual - median[group]), group, n_clusters)
+    inlier = residual <= (median + _INLIER_SIGMAS * _MAD_TO_SIGMA * mad)[group]
+    counts = np.bincount(group[inlier], minlength=n_clusters)
+    sums = np.bincount(group[inlier], weights=residual[inlier] ** 2, minlength=n_clusters)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, np.sqrt(sums / np.maximum(counts, 1)), np.nan)
+
+
+def sweep_residuals(a, flow, sweep, workers=1):
+    """The distance from each moved point ``a + flow`` to the nearest point of ``sweep``.
+
+    The residual of a result of two sweeps, whose b-points are its own flow (so that
+    ``|R a + t - b|`` is 0 by construction). NaN where the flow is (no cluster at all).
+    """
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    moved = np.asarray(a, dtype=float) + np.asarray(flow, dtype=float)
+    residual = np.full(len(moved), np.nan)
+    finite = np.isfinite(moved).all(axis=1)
+    residual[finite] = cKDTree(sweep).query(moved[finite], workers=workers)[0]
+    return residual
+
+
+def summarize(X, labels, rotations, translations, sigmas=None, *, residuals=None, moving=None):
     """One row per cluster: size, motion, residual and motion relative to the background.
 
     The background is the largest cluster. ``displacement_vs_background`` is the median
@@ -285,6 +316,10 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     correspondences. A cluster is ``moving`` when the displacement exceeds
     :data:`mmreg._motion.MOVING_FACTOR` (3) times the residual scale
     (:func:`mmreg._motion.moving_clusters`).
+
+    ``residuals`` (one per row) replace ``|R a + t - b|`` in the two residual columns:
+    for two sweeps, where ``b = a + flow`` is the result's own (:func:`sweep_residuals`).
+    ``moving`` (one per cluster) replaces the rule above (the estimator's own).
 
     Returns a :class:`pandas.DataFrame` (coordinates in the units of the points).
     """
@@ -301,13 +336,19 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     n_clusters = len(rotations)
     static = static_cluster(labels)
     displacement, scale = motion_statistics(a, b, labels, rotations, translations, static)
-    moving = moving_from_statistics(displacement, scale, static)  # moving_clusters' rule
+    if moving is None:
+        moving = moving_from_statistics(displacement, scale, static)  # moving_clusters' rule
+    moving = np.asarray(moving, dtype=bool)
     angles = rotation_angle_deg(rotations)
     clustered = np.flatnonzero(labels >= 0)
     group = labels[clustered]
     sizes = np.bincount(group, minlength=n_clusters)
     own = moved_rows(rotations, translations, group, np.ascontiguousarray(a[clustered].T)).T
     squared = np.sum((own - b[clustered]) ** 2, axis=1)
+    if residuals is not None:
+        residuals = np.asarray(residuals, dtype=float)[clustered]
+        squared = residuals**2
+        scale = _robust_rms(residuals, group, n_clusters)
     frame = pd.DataFrame({"label": np.arange(n_clusters), "size": sizes})
     frame["fraction"] = sizes / max(len(labels), 1)
     frame["rotation_angle_deg"] = angles
