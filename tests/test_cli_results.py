@@ -85,6 +85,8 @@ def test_view_and_evaluate_a_run_of_frames(tmp_path, scheduler, capsys):
     np.save(tmp_path / "truth.npy", truth)
     out = tmp_path / "run"
     assert main(["run", str(frames), "--out", str(out), "--scheduler", scheduler, "-q"]) == 0
+    # Frames of index-aligned clouds are correspondences: --tau's default is 1.5.
+    assert json.loads((out / "run.json").read_text())["configuration"]["tau"] == 1.5
     capsys.readouterr()
     # Two jobs: view needs to be told which.
     assert main(["view", str(out)]) == 2
@@ -112,6 +114,8 @@ def test_evaluate_every_job_of_a_sweep_run_against_its_datasets_truth(tmp_path, 
     out = tmp_path / "run"
     command = ["run", str(log), "--pairs", "sweeps", "--out", str(out), "--scheduler", scheduler]
     assert main([*command, "-q"]) == 0
+    # Two LiDAR sweeps: --tau's default is 5, as for 'mmreg register --sweep'.
+    assert json.loads((out / "run.json").read_text())["configuration"]["tau"] == 5.0
     rows, _ = _json(capsys, "evaluate", str(out))
     jobs = dataset_jobs(log, pairs="sweeps")
     assert [row["job"] for row in rows] == [job.name for job in jobs]
