@@ -32,7 +32,9 @@ class Result:
     """One result: its labels and motions, and how to get its points and truth.
 
     ``derived``: the b-points of :meth:`points` are the result's own flow (two raw
-    sweeps), so no error may be measured against them.
+    sweeps), so no error may be measured against them. ``external``: the points are
+    read from files outside the result (its input files, or a run's dataset), which may
+    have moved or changed since; else from the result's own ``X.npy``.
     """
 
     name: str
@@ -44,6 +46,7 @@ class Result:
     flow: Any = None
     camera: Any = None
     derived: bool = False
+    external: bool = True
     _points: Any = field(default=None, repr=False)
     _job: Any = field(default=None, repr=False)
     _cache: dict = field(default_factory=dict, repr=False)
@@ -152,6 +155,7 @@ def _directory_result(folder):
     result.camera = run.get("camera")
     # With --sweep, X.npy holds the first sweep and where the result's flow moves it.
     result.derived = run.get("sweep") is not None
+    result.external = not (folder / "X.npy").exists()
     result._points = lambda required: read_result_input(folder, len(labels), required=required)
     return result
 

@@ -173,9 +173,12 @@ def _truth_of(result, truth_path):
 
 
 def _points(result, needed):
-    """The result's points, or None with a warning naming the file at fault."""
+    """The result's points, or None with a warning naming the input file at fault (a
+    moved or changed input, outside the result)."""
     if not needed:
         return None
+    if not result.external:  # the result's own X.npy: damage to it is an error
+        return result.points(required=False)
     try:
         return result.points(required=False)
     except CLIError as error:

@@ -20,8 +20,9 @@ community defines them:
   Outliers3D of HPLFlowNet and PointPWC-Net);
 * :func:`dynamic_mask`, :func:`three_way_epe` and :func:`dynamic_iou` (Argoverse 2's
   scene-flow challenge); :func:`bucketed_epe` (bucket normalised EPE, its 2024
-  measure); :func:`make_end_point_error_scorer` and
-  :func:`scene_flow_scorers` score ``flow_`` against the true flow as ``y``.
+  measure); :func:`make_end_point_error_scorer`,
+  :func:`make_bucketed_epe_scorer` and :func:`scene_flow_scorers` score ``flow_``
+  against the true flow as ``y``.
 """
 
 from sklearn.metrics import adjusted_rand_score
@@ -36,6 +37,7 @@ from mmreg.metrics._scene_flow import (
     dynamic_iou,
     dynamic_mask,
     end_point_error,
+    make_bucketed_epe_scorer,
     make_end_point_error_scorer,
     scene_flow_metrics,
     scene_flow_scorers,
@@ -60,6 +62,7 @@ __all__ = [
     "evaluate",
     "ground_truth_poses",
     "iou_score",
+    "make_bucketed_epe_scorer",
     "make_end_point_error_scorer",
     "make_iou_scorer",
     "make_misclassification_scorer",

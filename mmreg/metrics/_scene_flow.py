@@ -12,7 +12,9 @@ flow) and of boolean point masks, as the scene-flow papers and benchmarks define
 * :func:`bucketed_epe`: bucket normalised EPE, the Argoverse 2 2024 scene-flow
   challenge's measure (Khatri et al., ECCV 2024; BucketedSceneFlowEval), per class and
   speed bucket, each moving bucket's error divided by its speed;
-* scorers for ``GridSearchCV`` that read a fitted estimator's ``flow_``.
+* scorers for ``GridSearchCV`` that read a fitted estimator's ``flow_``
+  (:func:`make_end_point_error_scorer`, :func:`make_bucketed_epe_scorer`,
+  :func:`scene_flow_scorers`).
 
 A registration estimator's flow is the rigid flow of its clusters,
 ``flow_[i] = R_j a_i + t_j - a_i`` for the cluster ``j`` of correspondence ``i``.
@@ -26,6 +28,7 @@ __all__ = [
     "dynamic_iou",
     "dynamic_mask",
     "end_point_error",
+    "make_bucketed_epe_scorer",
     "make_end_point_error_scorer",
     "scene_flow_metrics",
     "scene_flow_scorers",
@@ -601,6 +604,43 @@ def make_end_point_error_scorer():
     ({'max_iter': 10}, 0.0)
     """
     return _FlowScorer("end_point_error", end_point_error, -1.0)
+
+
+def make_bucketed_epe_scorer(*, bucket_edges=None):
+    """Scorer of minus the mean dynamic normalised EPE (:func:`bucketed_epe`) of ``flow_``.
+
+    One class (the scorer sees no point classes): the dynamic normalised EPE of the
+    moving buckets of every point, the challenge's ranking measure for a dataset without
+    classes. ``y`` is the true flow, ego-motion compensated (a static point has zero
+    flow), and each split scores the rows it fits, as for
+    :func:`make_end_point_error_scorer`. A scene without a moving point scores NaN.
+
+    Parameters
+    ----------
+    bucket_edges : array-like, default=None
+        As for :func:`bucketed_epe`.
+
+    Returns
+    -------
+    scorer : callable
+        ``scorer(estimator, X, y)``, greater (closer to 0) is better.
+
+    Examples
+    --------
+    >>> from mmreg import MultiModelRegistration
+    >>> from mmreg.datasets import make_scene
+    >>> from mmreg.metrics import make_bucketed_epe_scorer
+    >>> scene = make_scene(n_objects=2, n_points=200, random_state=0)
+    >>> estimator = MultiModelRegistration(random_state=0).fit(scene.X)
+    >>> round(-make_bucketed_epe_scorer()(estimator, scene.X, scene.b - scene.a), 6)
+    0.0
+    """
+    edges = _check_bucket_edges(bucket_edges)
+
+    def metric(flow_true, flow_pred):
+        return bucketed_epe(flow_true, flow_pred, bucket_edges=edges)["mean_dynamic_normalized_epe"]
+
+    return _FlowScorer("bucketed_epe", metric, -1.0)
 
 
 def scene_flow_scorers():
