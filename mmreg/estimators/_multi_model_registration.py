@@ -260,7 +260,9 @@ class MultiModelRegistration(BaseRegistration):
     converged_ : bool
         Whether the last iteration left everything unchanged.
     history_ : list of dict
-        Robust variant: per iteration, the number of clusters, merges, clusters dropped
+        Robust variant: per iteration, the number of clusters (as reported: the slow
+        pieces of the static world counted with it), of the pieces the loop keeps apart
+        (``pieces``, which the final clean-up may still join), merges, clusters dropped
         below ``min_cluster_size``, outliers and proposed clusters. Empty for the paper
         variant.
     log_outlier_density_ : float
