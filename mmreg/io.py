@@ -1548,8 +1548,8 @@ def read_point_cloud(path, *, colors=False, times=False):
     return out[0] if len(out) == 1 else out
 
 
-def write_point_cloud(path, points, colors=None):
-    """Write a point cloud, atomically.
+def write_point_cloud(path, points, colors=None, labels=None):
+    """Write a point cloud, atomically, with colours and a per-point label if given.
 
     Parameters
     ----------
@@ -1561,18 +1561,25 @@ def write_point_cloud(path, points, colors=None):
         Finite coordinates, ``n >= 1``.
     colors : array-like of shape (n, 3), optional
         RGB in ``[0, 1]`` (stored as 8-bit by both formats).
+    labels : array-like of shape (n,), optional
+        An integer per point (a cluster, ``-1`` for outliers), stored as a signed 32-bit
+        vertex property ``label`` (``.ply``: ``property int label``; ``.pcd``: field
+        ``label``, type ``I``, as PCL's ``PointXYZRGBL``). CloudCompare shows it as a
+        scalar field to filter by, Open3D's tensor API reads it as ``pcd.point["label"]``
+        (``open3d.t.io.read_point_cloud``), plyfile as ``vertex["label"]``.
+        :func:`read_point_cloud` ignores it (it returns points and colours only).
 
     Raises
     ------
     ValueError
         If the shapes are wrong, a value is NaN or infinity, a colour lies outside
-        ``[0, 1]``, colours are given for ``.xyz``, the extension is unknown, or Open3D
-        fails to write the file.
+        ``[0, 1]``, a label is not an integer of 32 bits, colours or labels are given for
+        ``.xyz``, or the extension is unknown.
 
     Notes
     -----
-    Open3D chooses the format by extension, so the data first go to a temporary file with
-    the same extension in the same folder, which is then renamed onto ``path``.
+    The file is written to a temporary file in the same folder first, which is then
+    renamed onto ``path``.
 
     Examples
     --------
@@ -1598,17 +1605,38 @@ def write_point_cloud(path, points, colors=None):
             )
         if colors.min() < 0 or colors.max() > 1:
             raise ValueError("colors must lie in [0, 1] (RGB fractions).")
+    if labels is not None:
+        if suffix == ".xyz":
+            raise ValueError(f"{path}: .xyz files hold no labels; write .ply or .pcd instead.")
+        labels = _check_point_labels(labels, len(points))
     if suffix == ".xyz":
         _write_text_table(path, points, None)
         return
     rgb = None if colors is None else np.round(colors * 255).astype(np.uint8)
-    data = _ply_bytes(points, rgb) if suffix == ".ply" else _pcd_bytes(points, rgb)
+    write = _ply_bytes if suffix == ".ply" else _pcd_bytes
+    data = write(points, rgb, labels)
     with atomic_write(path) as handle:
         handle.write(data)
 
 
-def _ply_bytes(points, rgb):
-    """A binary little-endian PLY file: float64 x, y, z and 8-bit red, green, blue."""
+def _check_point_labels(labels, n):
+    """One integer per point that fits a signed 32-bit property, as int32."""
+    array = np.asarray(labels)
+    if array.shape != (n,):
+        raise ValueError(f"labels must have shape ({n},), one per point; got {array.shape}.")
+    if array.dtype.kind == "f":
+        if not np.all(np.isfinite(array)) or np.any(array != np.round(array)):
+            raise ValueError("labels must be integers.")
+    elif array.dtype.kind not in "iub":
+        raise ValueError(f"labels must be integers; got dtype {array.dtype}.")
+    info = np.iinfo(np.int32)
+    if n and (array.min() < info.min or array.max() > info.max):
+        raise ValueError("labels must fit in 32 bits (a PLY 'int' property).")
+    return array.astype(np.int32)
+
+
+def _ply_bytes(points, rgb, labels=None):
+    """A binary little-endian PLY file: float64 x, y, z, 8-bit red, green, blue, int label."""
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     header = ["ply", "format binary_little_endian 1.0", "comment Created by mmreg"]
     header.append(f"element vertex {len(points)}")
@@ -1616,6 +1644,9 @@ def _ply_bytes(points, rgb):
     if rgb is not None:
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
         header += [f"property uchar {name}" for name in ("red", "green", "blue")]
+    if labels is not None:
+        fields.append(("label", "<i4"))
+        header.append("property int label")
     header.append("end_header")
     record = np.empty(len(points), dtype=fields)
     for column, name in enumerate("xyz"):
@@ -1623,11 +1654,13 @@ def _ply_bytes(points, rgb):
     if rgb is not None:
         for column, name in enumerate(("red", "green", "blue")):
             record[name] = rgb[:, column]
+    if labels is not None:
+        record["label"] = labels
     return ("\n".join(header) + "\n").encode("ascii") + record.tobytes()
 
 
-def _pcd_bytes(points, rgb):
-    """A binary PCD v0.7 file: float32 x, y, z and packed 8-bit rgb (as Open3D writes)."""
+def _pcd_bytes(points, rgb, labels=None):
+    """A binary PCD v0.7 file: float32 x, y, z, packed 8-bit rgb (as Open3D writes), label."""
     names, sizes, types = ["x", "y", "z"], ["4"] * 3, ["F"] * 3
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if rgb is not None:
@@ -1635,6 +1668,11 @@ def _pcd_bytes(points, rgb):
         sizes.append("4")
         types.append("U")
         fields.append(("rgb", "<u4"))
+    if labels is not None:
+        names.append("label")
+        sizes.append("4")
+        types.append("I")
+        fields.append(("label", "<i4"))
     n = len(points)
     header = [
         "# .PCD v0.7 - Point Cloud Data file format",
@@ -1655,4 +1693,6 @@ def _pcd_bytes(points, rgb):
     if rgb is not None:
         rgb = rgb.astype(np.uint32)
         record["rgb"] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]
+    if labels is not None:
+        record["label"] = labels
     return ("\n".join(header) + "\n").encode("ascii") + record.tobytes()

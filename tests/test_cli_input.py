@@ -44,7 +44,7 @@ def test_view_and_evaluate_read_the_input_again(files, capsys):
     assert (folder / "plain.png").read_bytes()[:4] == b"\x89PNG"
 
 
-def test_a_changed_or_missing_input_is_an_error(files, capsys):
+def test_a_changed_or_missing_input_is_named_and_iou_needs_none(files, capsys):
     folder, scene = files
     assert _register(folder, folder / "plain") == 0
     assert _register(folder, folder / "saved", "--save-input") == 0
@@ -53,12 +53,54 @@ def test_a_changed_or_missing_input_is_an_error(files, capsys):
     np.save(folder / "pairs.npy", changed)
     capsys.readouterr()
     assert main(["view", str(folder / "plain")]) == 2
-    assert "changed since" in capsys.readouterr().err
-    assert main(["evaluate", str(folder / "plain"), str(folder / "truth.npz")]) == 2
-    assert "changed since" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "pairs.npy: changed since" in err and len(err.strip().splitlines()) == 1
+    # The labels alone answer the IoU: the changed input is a warning, the errors n/a.
+    assert main(["evaluate", str(folder / "plain"), str(folder / "truth.npz"), "--json"]) == 0
+    captured = capsys.readouterr()
+    scores = json.loads(captured.out)
+    assert scores["iou"] == 1.0 and scores["rotation_error_deg"] is None
+    assert "pairs.npy: changed since" in captured.err
     (folder / "pairs.npy").unlink()
     assert main(["view", str(folder / "plain")]) == 2
     assert "pairs.npy: no such file" in capsys.readouterr().err
+    assert _evaluate(folder / "plain", folder / "truth.npz", capsys)["iou"] == 1.0
     # The copy makes the result independent of the input file.
     assert main(["view", str(folder / "saved")]) == 0
     assert _evaluate(folder / "saved", folder / "truth.npz", capsys)["iou"] == 1.0
+
+
+@pytest.fixture
+def cloud_and_flow(tmp_path):
+    from mmreg import io as mmio
+
+    scene = make_scene(n_objects=3, n_points=600, random_state=1)
+    mmio.write_point_cloud(tmp_path / "frame0.ply", scene.a)
+    np.save(tmp_path / "flow.npy", scene.b - scene.a)
+    np.save(tmp_path / "init.npy", scene.labels)
+    command = ["register", str(tmp_path / "frame0.ply"), "--flow", str(tmp_path / "flow.npy")]
+    command += ["--init", str(tmp_path / "init.npy"), "--out", str(tmp_path / "out"), "-q"]
+    assert main(command) == 0
+    return tmp_path, scene
+
+
+def test_a_changed_flow_is_blamed_on_the_flow_not_the_cloud(cloud_and_flow, capsys):
+    folder, scene = cloud_and_flow
+    flow = np.load(folder / "flow.npy")
+    flow[5, 0] += 0.5
+    np.save(folder / "flow.npy", flow)
+    capsys.readouterr()
+    assert main(["view", str(folder / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"{(folder / 'flow.npy').resolve()}: changed since" in err
+    assert "frame0.ply" not in err
+
+
+def test_a_moved_cloud_is_named(cloud_and_flow, capsys):
+    folder, scene = cloud_and_flow
+    (folder / "frame0.ply").rename(folder / "elsewhere.ply")
+    capsys.readouterr()
+    assert main(["view", str(folder / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"mmreg: error: {(folder / 'frame0.ply').resolve()}: no such file")
+    assert len(err.splitlines()) == 1

@@ -6,7 +6,8 @@ A result directory (written by ``mmreg register`` and ``mmreg demo --out``) hold
 * ``motions.json``: per cluster its label, 4 x 4 ``transform``, ``rotation``,
   ``translation``, ``rotation_angle_deg``, ``sigma``, ``size`` and ``moving``;
 * ``summary.csv``: one row per cluster (see :func:`summarize`);
-* ``clusters.ply``: the a-points coloured by cluster, outliers grey;
+* ``clusters.ply``: the a-points coloured by cluster, outliers grey, and each point's
+  cluster as an int property ``label`` (-1 for outliers);
 * ``result.png``: the picture;
 * ``X.npy``: the input correspondences ``[a | b]``, only on request (``mmreg register
   --save-input``) or when there is no input file (``mmreg demo``);
@@ -273,7 +274,38 @@ def background_label(labels):
     return None if label < 0 else label
 
 
-def summarize(X, labels, rotations, translations, sigmas=None):
+def _robust_rms(residual, group, n_clusters):
+    """Per group, the RMS of its inliers (median + 3 robust standard deviations)."""
+    import numpy as np
+
+    from mmreg._motion import _INLIER_SIGMAS, _MAD_TO_SIGMA, _group_median
+
+    median = _group_median(residual, group, n_clusters)
+    mad = _group_median(np.abs(residual - median[group]), group, n_clusters)
+    inlier = residual <= (median + _INLIER_SIGMAS * _MAD_TO_SIGMA * mad)[group]
+    counts = np.bincount(group[inlier], minlength=n_clusters)
+    sums = np.bincount(group[inlier], weights=residual[inlier] ** 2, minlength=n_clusters)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, np.sqrt(sums / np.maximum(counts, 1)), np.nan)
+
+
+def sweep_residuals(a, flow, sweep, workers=1):
+    """The distance from each moved point ``a + flow`` to the nearest point of ``sweep``.
+
+    The residual of a result of two sweeps, whose b-points are its own flow (so that
+    ``|R a + t - b|`` is 0 by construction). NaN where the flow is (no cluster at all).
+    """
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    moved = np.asarray(a, dtype=float) + np.asarray(flow, dtype=float)
+    residual = np.full(len(moved), np.nan)
+    finite = np.isfinite(moved).all(axis=1)
+    residual[finite] = cKDTree(sweep).query(moved[finite], workers=workers)[0]
+    return residual
+
+
+def summarize(X, labels, rotations, translations, sigmas=None, *, residuals=None, moving=None):
     """One row per cluster: size, motion, residual and motion relative to the background.
 
     The background is the largest cluster. ``displacement_vs_background`` is the median
@@ -284,6 +316,10 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     correspondences. A cluster is ``moving`` when the displacement exceeds
     :data:`mmreg._motion.MOVING_FACTOR` (3) times the residual scale
     (:func:`mmreg._motion.moving_clusters`).
+
+    ``residuals`` (one per row) replace ``|R a + t - b|`` in the two residual columns:
+    for two sweeps, where ``b = a + flow`` is the result's own (:func:`sweep_residuals`).
+    ``moving`` (one per cluster) replaces the rule above (the estimator's own).
 
     Returns a :class:`pandas.DataFrame` (coordinates in the units of the points).
     """
@@ -300,13 +336,19 @@ def summarize(X, labels, rotations, translations, sigmas=None):
     n_clusters = len(rotations)
     static = static_cluster(labels)
     displacement, scale = motion_statistics(a, b, labels, rotations, translations, static)
-    moving = moving_from_statistics(displacement, scale, static)  # moving_clusters' rule
+    if moving is None:
+        moving = moving_from_statistics(displacement, scale, static)  # moving_clusters' rule
+    moving = np.asarray(moving, dtype=bool)
     angles = rotation_angle_deg(rotations)
     clustered = np.flatnonzero(labels >= 0)
     group = labels[clustered]
     sizes = np.bincount(group, minlength=n_clusters)
     own = moved_rows(rotations, translations, group, np.ascontiguousarray(a[clustered].T)).T
     squared = np.sum((own - b[clustered]) ** 2, axis=1)
+    if residuals is not None:
+        residuals = np.asarray(residuals, dtype=float)[clustered]
+        squared = residuals**2
+        scale = _robust_rms(residuals, group, n_clusters)
     frame = pd.DataFrame({"label": np.arange(n_clusters), "size": sizes})
     frame["fraction"] = sizes / max(len(labels), 1)
     frame["rotation_angle_deg"] = angles
@@ -609,7 +651,7 @@ def write_result_dir(
         )
         summary.to_csv(staging / "summary.csv", index=False, float_format="%.6g")
         colors = cluster_colors(labels, background=True)  # as in the picture
-        mmio.write_point_cloud(staging / "clusters.ply", X[:, :3], colors=colors)
+        mmio.write_point_cloud(staging / "clusters.ply", X[:, :3], colors=colors, labels=labels)
         (staging / "result.png").write_bytes(png)
         if save_input:
             np.save(staging / "X.npy", X)
@@ -648,20 +690,60 @@ def correspondences_digest(X):
     return hashlib.sha256(np.ascontiguousarray(X, dtype=np.float64).data).hexdigest()
 
 
+def file_digest(path):
+    """The SHA-256 (hex) of a file's bytes, read in chunks."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+# The input files a result may be read again from, by their run.json keys and options.
+_INPUT_FILES = (("input", "INPUT"), ("target", "--target"), ("flow", "--flow"))
+
+
 def input_record(X, input, target=None, flow=None):
-    """What ``run.json`` keeps of an input file to read it again: absolute paths, digest."""
+    """What ``run.json`` keeps of an input file to read it again: absolute paths, digests.
+
+    ``input_sha256`` is the digest of the correspondences read, ``files_sha256`` that of
+    each file's bytes (so that a changed file can be named, see :func:`read_result_input`).
+    """
     paths = {"input": input, "target": target, "flow": flow}
     record = {f"{name}_path": str(Path(path).resolve()) for name, path in paths.items() if path}
-    return record | {"input_sha256": correspondences_digest(X)}
+    files = {name: file_digest(path) for name, path in paths.items() if path}
+    return record | {"input_sha256": correspondences_digest(X), "files_sha256": files}
+
+
+def _changed_inputs(run, folder):
+    """The input files of ``run`` that are missing or differ from what was recorded.
+
+    Returns ``(missing, changed)``: lists of paths. ``changed`` is empty when the record
+    has no per-file digests (results of older versions).
+    """
+    missing, changed = [], []
+    recorded = run.get("files_sha256") or {}
+    for name, _ in _INPUT_FILES:
+        path = run.get(f"{name}_path")
+        if not path:
+            continue
+        if not Path(path).is_file():
+            missing.append(path)
+        elif name in recorded and file_digest(path) != recorded[name]:
+            changed.append(path)
+    return missing, changed
 
 
 def read_result_input(folder, n, *, required=True):
-    """The correspondences of a result directory: its ``X.npy``, else its input file.
+    """The correspondences of a result directory: its ``X.npy``, else its input files.
 
     Without ``X.npy`` the input is read again from the paths in ``run.json`` and must
     still hold the same correspondences (its SHA-256). Returns None when the result
     keeps neither and ``required`` is False; otherwise that, a missing, changed or
-    unreadable input, or a length other than ``n`` is a CLIError.
+    unreadable input, or a length other than ``n`` is a CLIError of one line that names
+    the file at fault (the cloud, its ``--target`` or its ``--flow``).
     """
     folder = Path(folder)
     saved = folder / "X.npy"
@@ -683,14 +765,27 @@ def read_result_input(folder, n, *, required=True):
             )
         from mmreg import io as mmio
 
-        source, target, flow = (run.get(f"{k}_path") for k in ("input", "target", "flow"))
+        again = "run 'mmreg register' again (--save-input keeps a copy in the result)"
+        missing, changed = _changed_inputs(run, folder)
+        if missing:
+            raise CLIError(
+                f"{missing[0]}: no such file; {folder} was computed from it (moved or "
+                f"deleted since?): put it back, or {again}"
+            )
+        if changed:
+            raise CLIError(
+                f"{changed[0]}: changed since {folder} was computed from it; put the "
+                f"original back, or {again}"
+            )
+        source, target, flow = (run.get(f"{k}_path") for k, _ in _INPUT_FILES)
         with reading(source, target, flow):
             X = mmio.read_correspondences(source, target=target, flow=flow)
         X = check_correspondences(X, source)
         if correspondences_digest(X) != run.get("input_sha256"):
+            named = " or ".join(str(p) for p in (source, target, flow) if p)
             raise CLIError(
-                f"{source}: not the correspondences {folder} was computed from (the file "
-                "changed since); run 'mmreg register' again (--save-input keeps a copy)"
+                f"{named}: not the correspondences {folder} was computed from (changed "
+                f"since); {again}"
             )
     if len(X) != n:
         raise CLIError(f"{source}: {len(X)} correspondences for {n} labels")

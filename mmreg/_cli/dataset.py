@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from mmreg._cli._common import CLIError, one_line, plural, reading
-from mmreg._cli.register import _positive_float, _positive_int, _seed
+from mmreg._cli.register import TAU_RULE, _positive_int, _seed, _tau, resolve_tau
 
 NAME = "run"
 HELP = "process a dataset (a folder of frames or files, Argoverse 2 logs) on Dask"
@@ -106,7 +106,10 @@ def add_arguments(parser):
         help="the variant of MultiModelRegistration ('sweep': for LiDAR sweeps)",
     )
     parser.add_argument(
-        "--tau", type=_positive_float, default=5.0, help="distance gate, in the points' units"
+        "--tau",
+        type=_tau,
+        default="auto",
+        help="distance gate, in the points' units; 'none' turns it off; " + TAU_RULE,
     )
     parser.add_argument("--max-iter", type=_positive_int, default=10, help="most EM iterations")
     parser.add_argument("--seed", type=_seed, default=0, help="random seed of every job")
@@ -213,16 +216,19 @@ def _estimator(args):
 
 def run(args):
     from mmreg import io as mmio
-    from mmreg.runner import dataset_jobs, run_dataset
+    from mmreg.runner import (
+        Argoverse2PairJob,
+        Argoverse2SweepPairJob,
+        dataset_jobs,
+        run_dataset,
+    )
 
     if importlib.util.find_spec("distributed") is None:
         raise CLIError("'mmreg run' needs dask.distributed: pip install 'mmreg[dask]'")
     if args.out is None:
         args.out = f"{Path(args.dataset).resolve().name}-mmreg-run"
     out = Path(args.out)
-    configuration = _configuration(args)
-    resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
-    with reading(args.dataset):
+    with reading(args.dataset):  # a listing of the dataset: no job is loaded yet
         jobs = dataset_jobs(
             args.dataset,
             layout=args.layout,
@@ -230,6 +236,12 @@ def run(args):
             pairs=args.pairs,
             capture_times=args.capture_times,
         )
+    lidar = args.pairs == "sweeps" or any(
+        isinstance(job, (Argoverse2PairJob, Argoverse2SweepPairJob)) for job in jobs
+    )
+    args.tau = resolve_tau(args.tau, lidar)
+    configuration = _configuration(args)
+    resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
     try:
         if args.overwrite and (out / "jobs").is_dir():
             shutil.rmtree(out / "jobs")  # only result files, checked above

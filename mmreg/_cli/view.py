@@ -1,32 +1,37 @@
 """``mmreg view``: redraw the picture of a result directory."""
 
 import argparse
-import json
 from pathlib import Path
 
 from mmreg._cli._common import (
     CLIError,
-    check_labels,
     picture_format,
     plural,
-    read_result_input,
     reading,
     render_picture,
     result_figure,
 )
+from mmreg._cli._results import open_results
 from mmreg._cli.register import VIEWS
 
 NAME = "view"
-HELP = "redraw the picture of a result directory"
+HELP = "redraw the picture of a result directory, or of a job of 'mmreg run'"
 DESCRIPTION = """\
-Redraw the picture of a result directory (of "mmreg register" or "mmreg demo --out") from
-its labels.npy, motions.json and correspondences (its X.npy, else the input file named in
-its run.json, which must still hold the same correspondences): the a-points coloured by
-cluster (the largest, the background, in sand; outliers small and grey) and an arrow per
-cluster for its motion.
-Written to --out, by default RESULT_DIR/result.png (replacing it); the format follows the
-extension of --out (.png, .pdf, .svg, .eps, .jpg, ...). An existing --out other than
-RESULT_DIR/result.png is replaced only with --overwrite.
+Redraw the picture of RESULT: the a-points coloured by cluster (the largest, the
+background, in sand; outliers small and grey) and an arrow per cluster for its motion.
+
+RESULT is one of
+  - a result directory of "mmreg register" or "mmreg demo --out": its labels.npy,
+    motions.json and correspondences (its X.npy, else the input files named in its
+    run.json, which must still hold the same data; a moved or changed file is named);
+  - an "mmreg run" folder: the job named by --job (needed when it holds several);
+  - one job's file of a run, RUN/jobs/<job>.npz: its labels and motions, and its points
+    loaded again from the run's dataset.
+
+Written to --out, by default RESULT/result.png for a result directory (replacing it) and
+<job>.png in the current folder for a job; the format follows the extension of --out
+(.png, .pdf, .svg, .eps, .jpg, ...). Any other existing picture is replaced only with
+--overwrite.
 """
 
 
@@ -41,12 +46,20 @@ def _dpi(text):
 
 
 def add_arguments(parser):
-    parser.add_argument("result_dir", metavar="RESULT_DIR", help="a result directory")
+    parser.add_argument(
+        "result_dir",
+        metavar="RESULT",
+        help="a result directory, an 'mmreg run' folder or one of its jobs/<job>.npz",
+    )
+    parser.add_argument(
+        "--job", metavar="NAME", default=None, help="the job of an 'mmreg run' folder to draw"
+    )
     parser.add_argument(
         "--out",
         metavar="PICTURE",
         default=None,
-        help="picture to write, its format by its extension (default: RESULT_DIR/result.png)",
+        help="picture to write, its format by its extension (default: RESULT/result.png, "
+        "or <job>.png for a job)",
     )
     parser.add_argument(
         "--overwrite", action="store_true", help="replace an existing --out picture"
@@ -67,51 +80,39 @@ def run(args):
 
     from mmreg import io as mmio
 
+    (result,) = open_results(args.result_dir, job=args.job)
     folder = Path(args.result_dir)
-    if not folder.is_dir():
-        raise CLIError(f"{folder}: not a result directory (no such directory)")
-    out = Path(args.out) if args.out is not None else folder / "result.png"
+    own = folder / "result.png" if result.path.is_dir() else Path(f"{result.name}.png")
+    out = Path(args.out) if args.out is not None else own
     fmt = picture_format(out)  # before any work
-    if args.out is not None and not args.overwrite and out.exists():
-        same = out.resolve() == (folder / "result.png").resolve()
+    if not args.overwrite and out.exists():
+        same = result.path.is_dir() and out.resolve() == own.resolve()
         if not same:
             raise CLIError(f"{out}: exists; pass --overwrite to replace it")
     if out.is_dir():
         raise CLIError(f"{out}: is a folder; --out names the picture file")
-    paths = {name: folder / name for name in ("labels.npy", "motions.json")}
-    for path in paths.values():
-        if not path.exists():
-            raise CLIError(f"{path}: no such file (is {folder} a result directory?)")
-    with reading(paths["labels.npy"]):
-        labels = mmio.read_labels(paths["labels.npy"])
-        labels = check_labels(labels, len(labels), paths["labels.npy"])
-    X = read_result_input(folder, len(labels))
-    with reading(paths["motions.json"]):
-        motions = mmio.read_motions(paths["motions.json"])
-    rotations, translations = motions["rotations"], motions["translations"]
-    if len(rotations) < labels.max(initial=-1) + 1:
-        raise CLIError(
-            f"{paths['motions.json']}: {len(rotations)} motions for labels up to {labels.max()}"
-        )
+    if result.rotations is None:
+        raise CLIError(f"{folder / 'motions.json'}: no such file (is {folder} a result directory?)")
+    labels = result.labels
+    X = result.points()
+    rotations, translations = result.rotations, result.translations
     title = args.title
     if title is None:
-        n_moving = int(np.sum(motions["moving"])) if motions.get("moving") is not None else 0
+        moving = result.moving
+        n_moving = int(np.sum(moving)) if moving is not None else 0
+        what = "correspondences" if X.shape[1] == 6 and not result.derived else "points"
         title = (
-            f"{folder.name}: {len(X):,} correspondences -> {plural(len(rotations), 'cluster')} "
+            f"{result.name}: {len(X):,} {what} -> {plural(len(rotations), 'cluster')} "
             f"({n_moving} moving), {int(np.sum(labels < 0)):,} outliers"
         )
-    camera = None
-    if (folder / "run.json").exists():  # the intrinsics, when the result has them
-        with reading(folder / "run.json"):
-            camera = json.loads((folder / "run.json").read_text()).get("camera")
     fig = result_figure(
         X,
         labels,
         (rotations, translations),
-        moving=motions.get("moving"),
+        moving=result.moving,
         view=args.view,
         title=title,
-        camera=camera,
+        camera=result.camera,
     )
     picture = render_picture(fig, fmt, dpi=args.dpi)
     with reading(out), mmio.atomic_write(out) as handle:

@@ -15,6 +15,7 @@ from mmreg._likelihood import classify
 from mmreg._mixture import mixture_log_likelihood
 from mmreg._neighbors import query_workers
 from mmreg._validation import split_correspondences
+from mmreg._warnings import user_stacklevel
 from mmreg.estimators._em import default_sigma_floor, fit_cluster_models
 from mmreg.estimators._robust_steps import log_uniform_density
 
@@ -99,7 +100,7 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
                 "No cluster survived: every correspondence is labelled -1 (outlier). "
                 + self._no_cluster_hint,
                 DegenerateInputWarning,
-                stacklevel=3,
+                stacklevel=user_stacklevel(),
             )
             return
         degenerate = np.flatnonzero(degenerate_groups(a, labels, n_clusters))
@@ -108,7 +109,7 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
                 f"The a-points of cluster(s) {degenerate.tolist()} are coincident or "
                 "collinear, so their rotation is one of many that fit equally well.",
                 DegenerateInputWarning,
-                stacklevel=3,
+                stacklevel=user_stacklevel(),
             )
 
     def _gate_radius(self):

@@ -16,6 +16,7 @@ from mmreg._geometry import column_bounds
 from mmreg._neighbors import NeighbourTable
 from mmreg._validation import check_labels
 from mmreg._voxels import voxel_representatives, voxel_sample
+from mmreg._warnings import user_stacklevel
 from mmreg.estimators._base import BaseRegistration
 from mmreg.estimators._em import multi_model_em
 from mmreg.estimators._robust_em import (
@@ -259,7 +260,9 @@ class MultiModelRegistration(BaseRegistration):
     converged_ : bool
         Whether the last iteration left everything unchanged.
     history_ : list of dict
-        Robust variant: per iteration, the number of clusters, merges, clusters dropped
+        Robust variant: per iteration, the number of clusters (as reported: the slow
+        pieces of the static world counted with it), of the pieces the loop keeps apart
+        (``pieces``, which the final clean-up may still join), merges, clusters dropped
         below ``min_cluster_size``, outliers and proposed clusters. Empty for the paper
         variant.
     log_outlier_density_ : float
@@ -570,7 +573,7 @@ class MultiModelRegistration(BaseRegistration):
                 f"The EM did not settle within max_iter={self.max_iter} iterations; raise "
                 "max_iter (or, with the paper variant, use a coarser initial clustering).",
                 ConvergenceWarning,
-                stacklevel=2,
+                stacklevel=user_stacklevel(),
             )
         return self
 
@@ -679,7 +682,7 @@ class MultiModelRegistration(BaseRegistration):
                 "by a point or two per iteration and hardly merge. Are tau and the points in "
                 "the same units?",
                 ScaleWarning,
-                stacklevel=3,
+                stacklevel=user_stacklevel(),
             )
         # Coincident a-points (diameter 0) get a DegenerateInputWarning instead.
         low, high = column_bounds(a)
@@ -691,7 +694,7 @@ class MultiModelRegistration(BaseRegistration):
                 "so objects that move alike merge however far apart they are. Are tau and "
                 "the points in the same units? (tau=None turns the gate off on purpose.)",
                 ScaleWarning,
-                stacklevel=3,
+                stacklevel=user_stacklevel(),
             )
 
     def predict(self, X):

@@ -468,7 +468,10 @@ def robust_multi_model_em(
                 new[np.isin(new, layers[layers >= first_new])] = -1
             step = {
                 "iteration": n_iter,
-                "clusters": int(len(kept)),
+                # Clusters as reported (set below), and the pieces the loop keeps apart
+                # (slow pieces of the static world, pieces the clean-up may join).
+                "clusters": 0,
+                "pieces": int(len(kept)),
                 "merges": int(n_merges),
                 "static_pieces": int(n_static),
                 "joined": int(n_joined),
@@ -493,6 +496,7 @@ def robust_multi_model_em(
                 if slowly.any():
                     report = report.copy()
                     report[np.concatenate(list(compress(found, slowly)))] = static
+            step["clusters"] = int(np.count_nonzero(np.bincount(report[report >= 0])))
             n_changed = rows_moved(report_before, report)
             report_before = report
             new, n_clusters = _compact_initial(new)
@@ -571,6 +575,9 @@ def robust_multi_model_em(
         )
     moving = _moving(models, static, min_motion)
     weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), n)
+    if verbose and n_iter:
+        # After the clean-up: the clusters of the result, not the loop's pieces.
+        print(f"result: clusters {n_clusters}")
     return RobustEMResult(
         labels,
         models.rotations,

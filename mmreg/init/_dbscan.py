@@ -11,6 +11,7 @@ from sklearn.cluster import DBSCAN
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mmreg._neighbors import query_workers
+from mmreg._warnings import user_stacklevel
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 
 __all__ = ["AllOutliersWarning", "DBSCANClustering", "default_eps"]
@@ -243,7 +244,7 @@ class DBSCANClustering(PartitionInitializer):
                 f"eps={self.eps_:.4g} and min_samples={self.min_samples} (the median spacing "
                 f"of the points is {default_eps(points, 1.0):.4g}); raise eps.",
                 AllOutliersWarning,
-                stacklevel=3,  # the caller of fit (sklearn's _fit_context wraps it)
+                stacklevel=user_stacklevel(),
             )
         return self
 

@@ -38,6 +38,7 @@ from mmreg._neighbors import (
     nearest_in_other_component,
     query_workers,
 )
+from mmreg._warnings import user_stacklevel
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 
 __all__ = ["EuclideanClustering", "euclidean_clustering"]
@@ -1068,7 +1069,7 @@ def euclidean_clustering(
                 f"min_cluster_size={min_cluster_size} points; using the radius {radius:.6g}, "
                 f"which gives the most ({found}). Lower n_clusters or min_cluster_size.",
                 UserWarning,
-                stacklevel=2,
+                stacklevel=user_stacklevel(),
             )
     sizes = np.bincount(components, minlength=1)
     components = np.where(sizes[components] >= min_cluster_size, components, -1)

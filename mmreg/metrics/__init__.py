@@ -19,8 +19,10 @@ community defines them:
 * :func:`end_point_error` and :func:`scene_flow_metrics` (EPE3D, Acc3DS, Acc3DR,
   Outliers3D of HPLFlowNet and PointPWC-Net);
 * :func:`dynamic_mask`, :func:`three_way_epe` and :func:`dynamic_iou` (Argoverse 2's
-  scene-flow challenge); :func:`make_end_point_error_scorer` and
-  :func:`scene_flow_scorers` score ``flow_`` against the true flow as ``y``.
+  scene-flow challenge); :func:`bucketed_epe` (bucket normalised EPE, its 2024
+  measure); :func:`make_end_point_error_scorer`,
+  :func:`make_bucketed_epe_scorer` and :func:`scene_flow_scorers` score ``flow_``
+  against the true flow as ``y``.
 """
 
 from sklearn.metrics import adjusted_rand_score
@@ -31,9 +33,11 @@ from mmreg.metrics._objects import objects_found
 from mmreg.metrics._point import chamfer_distance, per_point_error
 from mmreg.metrics._pose import ground_truth_poses, rotation_error, translation_error
 from mmreg.metrics._scene_flow import (
+    bucketed_epe,
     dynamic_iou,
     dynamic_mask,
     end_point_error,
+    make_bucketed_epe_scorer,
     make_end_point_error_scorer,
     scene_flow_metrics,
     scene_flow_scorers,
@@ -50,6 +54,7 @@ from mmreg.metrics._scorer import (
 
 __all__ = [
     "adjusted_rand_score",
+    "bucketed_epe",
     "chamfer_distance",
     "dynamic_iou",
     "dynamic_mask",
@@ -57,6 +62,7 @@ __all__ = [
     "evaluate",
     "ground_truth_poses",
     "iou_score",
+    "make_bucketed_epe_scorer",
     "make_end_point_error_scorer",
     "make_iou_scorer",
     "make_misclassification_scorer",

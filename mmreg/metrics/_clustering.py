@@ -88,7 +88,8 @@ def match_clusters(table, *, true_outliers=True):
     # np.lexsort sorts by its last key first.
     order = np.lexsort((table.first_true[rows], table.sizes_true[rows], -counts, cols))
     cols_sorted = cols[order]
-    first = np.flatnonzero(np.r_[True, cols_sorted[1:] != cols_sorted[:-1]])
+    # The first row of each estimated cluster (none when no pair is admissible).
+    first = np.flatnonzero(np.r_[len(cols_sorted) > 0, cols_sorted[1:] != cols_sorted[:-1]])
     best = order[first]
     return cols[best], rows[best], counts[best]
 

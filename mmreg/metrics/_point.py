@@ -8,6 +8,7 @@ from sklearn.exceptions import UndefinedMetricWarning
 from sklearn.utils import check_array
 
 from mmreg._geometry import apply_motions
+from mmreg._warnings import user_stacklevel
 from mmreg.metrics._checks import check_correspondences, check_label_pair, check_transforms
 from mmreg.metrics._clustering import contingency, match_clusters
 
@@ -138,7 +139,7 @@ def per_point_error(X, labels_true, labels_pred, transforms_true, transforms_pre
             "No estimated object shares a correspondence with a ground-truth object, so "
             "the per-point error is undefined; returning NaN.",
             UndefinedMetricWarning,
-            stacklevel=2,
+            stacklevel=user_stacklevel(),
         )
         return np.nan
     moved_true = apply_motions(a, rot_true, trans_true, labels_true)

@@ -7,6 +7,7 @@ from sklearn.exceptions import UndefinedMetricWarning
 
 from mmreg._geometry import fit_rigid_grouped, rotation_angle
 from mmreg._validation import check_labels
+from mmreg._warnings import user_stacklevel
 from mmreg.metrics._checks import check_correspondences, check_label_pair, check_transforms
 from mmreg.metrics._clustering import contingency
 
@@ -81,7 +82,7 @@ def _pose_errors(labels_true, labels_pred, transforms_true, transforms_pred):
             "No estimated cluster shares a correspondence with a ground-truth object, so "
             "the pose errors are undefined; returning NaN.",
             UndefinedMetricWarning,
-            stacklevel=3,
+            stacklevel=user_stacklevel(),
         )
         return np.nan, np.nan
     scored, inverse = np.unique(cols, return_inverse=True)

@@ -1,4 +1,4 @@
-"""The scene-flow community's measures: EPE3D, Acc3DS/R, Outliers3D, three-way EPE, dynamic IoU.
+"""The scene-flow community's measures: EPE3D, Acc3DS/R, Outliers3D, three-way and bucketed EPE.
 
 Pure functions of flow arrays ``(n, d)`` (metres per frame pair; ``d = 3`` for scene
 flow) and of boolean point masks, as the scene-flow papers and benchmarks define them:
@@ -9,7 +9,12 @@ flow) and of boolean point masks, as the scene-flow papers and benchmarks define
 * :func:`dynamic_mask`, :func:`three_way_epe` and :func:`dynamic_iou`: the Argoverse 2
   scene-flow challenge's point classes and scores (``av2.evaluation.scene_flow.eval``),
   as also used by ZeroFlow and BucketedSceneFlowEval;
-* scorers for ``GridSearchCV`` that read a fitted estimator's ``flow_``.
+* :func:`bucketed_epe`: bucket normalised EPE, the Argoverse 2 2024 scene-flow
+  challenge's measure (Khatri et al., ECCV 2024; BucketedSceneFlowEval), per class and
+  speed bucket, each moving bucket's error divided by its speed;
+* scorers for ``GridSearchCV`` that read a fitted estimator's ``flow_``
+  (:func:`make_end_point_error_scorer`, :func:`make_bucketed_epe_scorer`,
+  :func:`scene_flow_scorers`).
 
 A registration estimator's flow is the rigid flow of its clusters,
 ``flow_[i] = R_j a_i + t_j - a_i`` for the cluster ``j`` of correspondence ``i``.
@@ -19,9 +24,11 @@ import numpy as np
 from sklearn.utils import check_array
 
 __all__ = [
+    "bucketed_epe",
     "dynamic_iou",
     "dynamic_mask",
     "end_point_error",
+    "make_bucketed_epe_scorer",
     "make_end_point_error_scorer",
     "scene_flow_metrics",
     "scene_flow_scorers",
@@ -35,6 +42,12 @@ RELATIVE_ERROR_EPS = 1e-4
 #: Argoverse 2's ``SCENE_FLOW_DYNAMIC_THRESHOLD``: 0.05 m between sweeps 0.1 s apart,
 #: i.e. 0.5 m/s.
 DYNAMIC_THRESHOLD = 0.05
+
+#: BucketedSceneFlowEval's speed buckets (``BucketedEPEEvaluator``: ``bucket_max_speed
+#: = 2.0``, ``num_buckets = 51``): edges 0, 0.04, ..., 2.0 metres per frame pair (0.4 m/s
+#: wide at 10 Hz) and a last bucket from 2.0 m (20 m/s) up. The first bucket holds the
+#: static points.
+BUCKET_EDGES = np.append(np.linspace(0.0, 2.0, 51), np.inf)
 
 
 def _check_flow_pair(flow_true, flow_pred, *, names=("flow_true", "flow_pred")):
@@ -334,6 +347,143 @@ def three_way_epe(flow_true, flow_pred, *, foreground, dynamic):
     return result
 
 
+def _check_bucket_edges(bucket_edges):
+    """Strictly increasing edges from 0, at least one moving bucket; as float64."""
+    if bucket_edges is None:
+        return BUCKET_EDGES
+    edges = np.asarray(bucket_edges, dtype=np.float64)
+    if edges.ndim != 1 or len(edges) < 3:
+        raise ValueError(
+            "bucket_edges must be 1-D with at least 3 edges (a static bucket and a moving "
+            f"one); got shape {edges.shape}."
+        )
+    if np.isnan(edges).any() or edges[0] != 0 or not np.all(np.diff(edges) > 0):
+        raise ValueError(
+            f"bucket_edges must start at 0 and increase strictly; got {edges.tolist()}."
+        )
+    return edges
+
+
+def bucketed_epe(flow_true, flow_pred, *, classes=None, bucket_edges=None):
+    """Bucket normalised EPE: the Argoverse 2 2024 scene-flow challenge's measure.
+
+    Points are split by class and by the speed of their true flow, ``s_i = ||f_i||``,
+    into buckets ``[e_k, e_{k+1})`` (default :data:`BUCKET_EDGES`: 0, 0.04, ..., 2.0 m
+    per frame pair, then 2.0 m and up; 0.4 m/s wide at 10 Hz). For a class:
+
+    * ``static_epe``: the mean end-point error of its points in the first bucket (speed
+      below 0.04 m, i.e. 0.4 m/s);
+    * ``dynamic_normalized_epe``: over its other (moving) buckets that hold points, the
+      mean of ``mean EPE / mean speed`` of each bucket (a ratio of the bucket's means,
+      not a mean of per-point ratios). 1 means an error as large as the motion itself:
+      a method that predicts zero flow scores 1 on every moving bucket.
+
+    ``mean_static_epe`` and ``mean_dynamic_normalized_epe`` average these over the
+    classes that have a value (a class with no point in a bucket range is left out, as
+    ``np.nanmean`` does); the challenge ranks by ``mean_dynamic_normalized_epe``. This is
+    BucketedSceneFlowEval's ``BucketedEPEEvaluator`` (``BucketResultMatrix``:
+    ``get_normalized_error_matrix``, ``get_overall_class_errors``,
+    ``get_mean_average_values``) on one frame, or on several frames passed stacked
+    (it pools each class's bucket over all points, as the evaluator weighs frames by
+    their counts). The challenge's classes are the meta-classes ``BACKGROUND``,
+    ``CAR``, ``OTHER_VEHICLES``, ``PEDESTRIAN`` and ``WHEELED_VRU`` of Argoverse 2's
+    annotation categories, scored on non-ground points within 35 m (in x and y) of the
+    ego vehicle, in ego-motion-compensated frames (the static world has zero flow):
+    pass those points, their flows and their classes.
+
+    Parameters
+    ----------
+    flow_true : array-like of shape (n_samples, d)
+        Ground-truth flow of each point, in metres per frame pair, with the ego motion
+        removed (a static point has zero flow).
+    flow_pred : array-like of shape (n_samples, d)
+        Estimated flow of each point, in the same frame.
+    classes : array-like of shape (n_samples,), default=None
+        The class of each point (integers or names); None puts every point in one
+        class, ``"all"``.
+    bucket_edges : array-like of shape (n_buckets + 1,), default=None
+        Speed-bucket edges in metres per frame pair, from 0, strictly increasing; the
+        last may be ``inf``. None: :data:`BUCKET_EDGES`. Points at or above the last
+        edge are in no bucket. At another frame rate than 10 Hz, scale the edges.
+
+    Returns
+    -------
+    scores : dict
+        ``"mean_static_epe"`` (metres) and ``"mean_dynamic_normalized_epe"`` (no unit),
+        floats, lower is better, NaN when no class has a value; ``"per_class"``: ``{class:
+        {"static_epe": float, "dynamic_normalized_epe": float}}``, NaN where the class
+        has no static point, or no moving one.
+
+    References
+    ----------
+    I. Khatri, K. Vedder, N. Peri, D. Ramanan and J. Hays, "I Can't Believe It's Not
+    Scene Flow!", ECCV 2024 (arXiv:2403.04739); its evaluation code,
+    BucketedSceneFlowEval (``bucketed_scene_flow_eval/eval/bucketed_epe.py``,
+    ``datasets/argoverse2/av2_metacategories.py``), the Argoverse 2 2024 scene-flow
+    challenge's scorer.
+
+    Examples
+    --------
+    >>> from mmreg.metrics import bucketed_epe
+    >>> truth = [[0.0, 0, 0], [0.0, 0, 0], [1.0, 0, 0], [0.1, 0, 0]]
+    >>> estimate = [[0.02, 0, 0], [0.0, 0, 0], [0.5, 0, 0], [0.1, 0.01, 0]]
+    >>> scores = bucketed_epe(truth, estimate, classes=["BACKGROUND", "BACKGROUND", "CAR",
+    ...                                                 "PEDESTRIAN"])
+    >>> {k: round(v, 3) for k, v in scores["per_class"]["CAR"].items()}
+    {'static_epe': nan, 'dynamic_normalized_epe': 0.5}
+    >>> round(scores["mean_static_epe"], 3), round(scores["mean_dynamic_normalized_epe"], 3)
+    (0.01, 0.3)
+
+    The car's 1 m motion is half wrong (0.5); the pedestrian's 0.1 m is 10 % wrong
+    (0.1): their mean is 0.3. The background, static, has only a static EPE (0.01).
+    """
+    flow_true, flow_pred = _check_flow_pair(flow_true, flow_pred)
+    n = len(flow_true)
+    edges = _check_bucket_edges(bucket_edges)
+    if classes is None:
+        names, index = ["all"], np.zeros(n, dtype=np.intp)
+    else:
+        classes = np.asarray(classes)
+        if classes.shape != (n,):
+            raise ValueError(
+                f"classes must have shape ({n},), one class per point; got {classes.shape}."
+            )
+        unique, index = np.unique(classes, return_inverse=True)
+        names = unique.tolist()
+    speed = np.linalg.norm(flow_true, axis=1)
+    error = _point_errors(flow_true, flow_pred)
+    n_buckets = len(edges) - 1
+    bucket = np.searchsorted(edges, speed, side="right") - 1  # [e_k, e_{k+1})
+    scored = bucket < n_buckets
+    cell = index[scored] * n_buckets + bucket[scored]
+    size = len(names) * n_buckets
+    counts = np.bincount(cell, minlength=size).reshape(len(names), n_buckets)
+    errors = np.bincount(cell, weights=error[scored], minlength=size)
+    speeds = np.bincount(cell, weights=speed[scored], minlength=size)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean_error = errors.reshape(counts.shape) / counts  # NaN where empty
+        mean_speed = speeds.reshape(counts.shape) / counts
+        normalized = mean_error[:, 1:] / mean_speed[:, 1:]  # moving buckets: speed > 0
+    static = mean_error[:, 0]
+    moving = np.full(len(names), np.nan)
+    filled = counts[:, 1:].any(axis=1)
+    moving[filled] = np.nanmean(normalized[filled], axis=1)
+    per_class = {
+        name: {"static_epe": float(s), "dynamic_normalized_epe": float(m)}
+        for name, s, m in zip(names, static, moving, strict=True)
+    }
+
+    def mean(values):
+        values = values[~np.isnan(values)]
+        return float(values.mean()) if len(values) else float("nan")
+
+    return {
+        "mean_static_epe": mean(static),
+        "mean_dynamic_normalized_epe": mean(moving),
+        "per_class": per_class,
+    }
+
+
 def dynamic_iou(dynamic_true, dynamic_pred):
     """Intersection over union of the dynamic and the static points (motion segmentation).
 
@@ -454,6 +604,43 @@ def make_end_point_error_scorer():
     ({'max_iter': 10}, 0.0)
     """
     return _FlowScorer("end_point_error", end_point_error, -1.0)
+
+
+def make_bucketed_epe_scorer(*, bucket_edges=None):
+    """Scorer of minus the mean dynamic normalised EPE (:func:`bucketed_epe`) of ``flow_``.
+
+    One class (the scorer sees no point classes): the dynamic normalised EPE of the
+    moving buckets of every point, the challenge's ranking measure for a dataset without
+    classes. ``y`` is the true flow, ego-motion compensated (a static point has zero
+    flow), and each split scores the rows it fits, as for
+    :func:`make_end_point_error_scorer`. A scene without a moving point scores NaN.
+
+    Parameters
+    ----------
+    bucket_edges : array-like, default=None
+        As for :func:`bucketed_epe`.
+
+    Returns
+    -------
+    scorer : callable
+        ``scorer(estimator, X, y)``, greater (closer to 0) is better.
+
+    Examples
+    --------
+    >>> from mmreg import MultiModelRegistration
+    >>> from mmreg.datasets import make_scene
+    >>> from mmreg.metrics import make_bucketed_epe_scorer
+    >>> scene = make_scene(n_objects=2, n_points=200, random_state=0)
+    >>> estimator = MultiModelRegistration(random_state=0).fit(scene.X)
+    >>> round(-make_bucketed_epe_scorer()(estimator, scene.X, scene.b - scene.a), 6)
+    0.0
+    """
+    edges = _check_bucket_edges(bucket_edges)
+
+    def metric(flow_true, flow_pred):
+        return bucketed_epe(flow_true, flow_pred, bucket_edges=edges)["mean_dynamic_normalized_epe"]
+
+    return _FlowScorer("bucketed_epe", metric, -1.0)
 
 
 def scene_flow_scorers():
