@@ -391,18 +391,62 @@ def render_png(fig, dpi=110):
     return render_picture(fig, "png", dpi)
 
 
-def result_figure(X, labels, motions, *, moving=None, view="auto", title=None, camera=None):
-    """The picture of a result: a street layout for camera-frame data, else a 3-D view.
+def result_figure(
+    X,
+    labels,
+    motions,
+    *,
+    moving=None,
+    view="auto",
+    title=None,
+    camera=None,
+    frame="auto",
+    interval=None,
+    range_=None,
+):
+    """The picture of a result, in the view that suits the frame of its points.
 
-    ``moving`` (one bool per cluster) names the clusters "moving" or "static" in the
-    legend; the largest is "background".
+    ``frame`` is ``"camera"`` (z along the view), ``"lidar"`` (z up, the sensor at the
+    origin) or ``"auto"``: from where the points lie (:func:`mmreg._frames.detect_frame`),
+    never from the sign of z alone. ``view="auto"`` draws a camera frame as a street
+    (camera view and bird's-eye view), a LiDAR sweep from above (:func:`plot_sweep`,
+    ``range_`` metres around the sensor, speeds in m/s with ``interval`` seconds between
+    the sweeps), anything else in 3-D; ``view="bev"`` is from above for every frame but a
+    camera's. ``moving`` (one bool per cluster) names the clusters "moving" or "static";
+    the largest is the background.
     """
     import numpy as np
     from matplotlib.figure import Figure
 
-    from mmreg.plotting import plot_clusters, plot_street
+    from mmreg._frames import detect_frame, looks_down_minus_z
+    from mmreg.plotting import SWEEP_RANGE, plot_clusters, plot_street, plot_sweep
 
     a = X[:, :3]
+    if frame == "auto":
+        frame = detect_frame(a)
+    if view == "auto":
+        view = {"camera": "street", "lidar": "bev"}.get(frame, "3d")
+    if view == "bev" and frame != "camera":
+        fig = Figure(figsize=(11.5, 8.0), layout="constrained")
+        plot_sweep(
+            a,
+            labels,
+            motions,
+            moving=moving,
+            interval=interval,
+            range_=SWEEP_RANGE if range_ is None else range_,
+            ax=fig.add_subplot(),
+        )
+        if title is not None:
+            fig.suptitle(title, fontsize=11)
+        return fig
+    if frame == "camera" and view in ("street", "bev", "camera") and looks_down_minus_z(a):
+        # OpenGL's camera (y up, looking down -z): turned about x into OpenCV's, which the
+        # street, bird's-eye and camera views draw.
+        flip = np.array([1.0, -1.0, -1.0])
+        a = a * flip
+        rotations, translations = (np.asarray(m, dtype=float) for m in motions)
+        motions = (rotations * flip[:, None] * flip[None, :], translations * flip)
     names = None
     reference = background_label(labels)
     if moving is not None:
@@ -410,8 +454,6 @@ def result_figure(X, labels, motions, *, moving=None, view="auto", title=None, c
             j: f"cluster {j}: " + ("background" if j == reference else "moving" if m else "static")
             for j, m in enumerate(np.asarray(moving, dtype=bool).tolist())
         }
-    if view == "auto":
-        view = "street" if np.all(a[:, 2] > 0) else "3d"
     if view == "street":
         fig = Figure(figsize=(13, 5.8))
         plot_street(

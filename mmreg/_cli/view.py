@@ -40,6 +40,22 @@ def _dpi(text):
     return value
 
 
+def _positive(unit):
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number of {unit}; got {text!r}") from None
+        if not (value > 0 and value < float("inf")):
+            raise argparse.ArgumentTypeError(f"must be a positive number of {unit}; got {text}")
+        return value
+
+    return parse
+
+
+_metres, _seconds = _positive("metres"), _positive("seconds")
+
+
 def add_arguments(parser):
     parser.add_argument("result_dir", metavar="RESULT_DIR", help="a result directory")
     parser.add_argument(
@@ -55,8 +71,33 @@ def add_arguments(parser):
         "--view",
         choices=VIEWS,
         default="auto",
-        help="'street' (camera and bird's-eye views) or one plotting view; 'auto': street "
-        "when every a-point has z > 0, else 3d",
+        help="'street' (camera and bird's-eye views), 'bev' (from above: a z-up sweep's x-y, "
+        "a camera frame's x-z) or one plotting view; 'auto': street for a camera frame, bev "
+        "for a LiDAR frame, else 3d",
+    )
+    parser.add_argument(
+        "--frame",
+        choices=("auto", "camera", "lidar"),
+        default="auto",
+        help="frame of the points: 'camera' (z along the view, every point in front), "
+        "'lidar' (z up, the sensor at the origin, points all around); 'auto': from where "
+        "the points lie",
+    )
+    parser.add_argument(
+        "--range",
+        dest="range_",
+        metavar="R",
+        type=_metres,
+        default=None,
+        help="a LiDAR sweep from above: the square R metres around the sensor (default 50)",
+    )
+    parser.add_argument(
+        "--interval",
+        metavar="SECONDS",
+        type=_seconds,
+        default=None,
+        help="seconds between the two sweeps, for speeds in m/s (default: run.json's, "
+        "else speeds in metres per frame)",
     )
     parser.add_argument("--title", default=None, help="title of the picture")
     parser.add_argument("--dpi", type=_dpi, default=110, help="resolution, dots per inch")
@@ -100,10 +141,13 @@ def run(args):
             f"{folder.name}: {len(X):,} correspondences -> {plural(len(rotations), 'cluster')} "
             f"({n_moving} moving), {int(np.sum(labels < 0)):,} outliers"
         )
-    camera = None
-    if (folder / "run.json").exists():  # the intrinsics, when the result has them
+    camera, interval = None, args.interval
+    if (folder / "run.json").exists():  # the intrinsics and the interval, when it has them
         with reading(folder / "run.json"):
-            camera = json.loads((folder / "run.json").read_text()).get("camera")
+            run_record = json.loads((folder / "run.json").read_text())
+        camera = run_record.get("camera")
+        if interval is None:
+            interval = run_record.get("interval")
     fig = result_figure(
         X,
         labels,
@@ -112,6 +156,9 @@ def run(args):
         view=args.view,
         title=title,
         camera=camera,
+        frame=args.frame,
+        interval=interval,
+        range_=args.range_,
     )
     picture = render_picture(fig, fmt, dpi=args.dpi)
     with reading(out), mmio.atomic_write(out) as handle:
