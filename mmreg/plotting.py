@@ -12,7 +12,8 @@ Views (``view``):
 * ``"3d"``: a 3-D scatter of ``(x, y, z)`` as given;
 * ``"top"``: looking down the z axis, x to the right and y up;
 * ``"bev"``: bird's-eye view of a camera frame (x right, y down, z forward, as in KITTI,
-  FlyingThings3D and OpenCV): x to the right, z (distance ahead) up the page;
+  FlyingThings3D and OpenCV): x to the right, z (distance ahead) up the page; of a z-up
+  LiDAR frame (``frame="lidar"``, or detected as one): as ``"top"``;
 * ``"camera"``: the points as a pinhole camera at the origin sees them; in pixels when
   ``camera`` gives the intrinsics (``fx``, ``fy``, ``cx``, ``cy``, ``width``, ``height``),
   else in normalised image coordinates ``(x / z, y / z)``.
@@ -21,6 +22,7 @@ Views (``view``):
 import numpy as np
 
 from mmreg import _sweep_layout
+from mmreg._frames import FRAMES, detect_frame
 from mmreg._grouping import group_centroids
 
 __all__ = [
@@ -331,6 +333,7 @@ def plot_clusters(
     max_points=60_000,
     random_state=0,
     colors=None,
+    frame="auto",
 ):
     """Draw the a-points coloured by cluster, with optional motion arrows or b-points.
 
@@ -380,6 +383,10 @@ def plot_clusters(
         Seeds the thinning.
     colors : dict, default=None
         ``{label: rgb}`` overriding the colours (used by :func:`plot_comparison`).
+    frame : {"auto", "camera", "lidar"}, default="auto"
+        The frame of the points, for ``view="bev"``: a camera's (seen from above is along
+        y) or a z-up LiDAR's (along z, as ``"top"``); ``"auto"``: from where the points
+        lie (a camera's when that does not show).
 
     Returns
     -------
@@ -408,9 +415,16 @@ def plot_clusters(
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {VIEWS}; got {view!r}.")
+    if frame not in ("auto", *FRAMES):
+        raise ValueError(f"frame must be 'auto', 'camera' or 'lidar'; got {frame!r}.")
     a = _check_points(a, "a")
     labels = _check_labels(labels, len(a))
     camera = _check_camera(camera)
+    if view == "bev" and a.shape[1] == 3:
+        if frame == "auto":
+            frame = detect_frame(a)
+        if frame == "lidar":  # z up: from above is along z
+            view = "top"
     ax = _new_axes(ax, view)
     ids, _ = _ranked(labels)
     background_label = _background_label(labels, background)
@@ -692,6 +706,7 @@ def plot_street(
         labels,
         ax=bev,
         view="bev",
+        frame="camera",
         motions=motions,
         relative_to=reference,
         legend=False,

@@ -314,3 +314,15 @@ def test_result_figure_keeps_3d_for_points_in_no_sensor_frame():
     motions = (np.stack([np.eye(3)] * 2), np.zeros((2, 3)))
     fig = result_figure(X, labels, motions)
     assert fig.axes[0].name == "3d"
+
+
+def test_plot_clusters_bev_of_a_z_up_sweep_is_from_above():
+    from matplotlib.figure import Figure
+
+    from mmreg.plotting import plot_clusters
+
+    points, labels = _sweep(lift=1.9)
+    ax = plot_clusters(points, labels, ax=Figure().add_subplot(), view="bev")
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x [m]", "y [m]")
+    ax = plot_clusters(points, labels, ax=Figure().add_subplot(), view="bev", frame="camera")
+    assert ax.get_ylabel().startswith("z, ahead of the camera")

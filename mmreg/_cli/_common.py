@@ -474,6 +474,7 @@ def result_figure(
         camera=camera,
         label_names=names,
         background=True,
+        frame=frame or "auto",
     )
     if title is not None:
         fig.suptitle(title, fontsize=11)
