@@ -1121,7 +1121,11 @@ def plot_sweep(
             rasterized=True,
             zorder=2,
         )
-    _draw_objects(ax, points, labels, shown, colors, displacement, diameter, range_, interval)
+    # One round factor for every arrow, from their lengths seen from above.
+    scale = _sweep_layout.arrow_scale(
+        [np.linalg.norm(d[:2]) for d in displacement.values()], 2 * range_
+    )
+    _draw_objects(ax, points, labels, shown, colors, displacement, diameter, range_, scale)
 
     ax.grid(True, color="0.88", lw=0.6, zorder=0)
     ax.set_axisbelow(True)
@@ -1132,9 +1136,6 @@ def plot_sweep(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.tick_params(labelsize=8)
-    scale = _sweep_layout.arrow_scale(
-        [np.linalg.norm(d) for d in displacement.values()], 2 * range_
-    )
     _sweep_legend(
         ax,
         labels,
@@ -1154,13 +1155,12 @@ def plot_sweep(
     return ax.get_figure()
 
 
-def _draw_objects(ax, points, labels, shown, colors, displacement, diameter, range_, interval):
-    """Each moving object's points, oriented box, arrow and a tag with its id and speed."""
+def _draw_objects(ax, points, labels, shown, colors, displacement, diameter, range_, scale):
+    """Each moving object's points, oriented box, arrow (lengthened by scale) and its id."""
     from matplotlib import patheffects
     from matplotlib.patches import FancyArrowPatch, Polygon
 
     window = 2 * range_
-    scale = _sweep_layout.arrow_scale([np.linalg.norm(d) for d in displacement.values()], window)
     halo = [patheffects.withStroke(linewidth=2.6, foreground="white")]
     for label, _ in shown:
         color = colors[label]
@@ -1184,7 +1184,7 @@ def _draw_objects(ax, points, labels, shown, colors, displacement, diameter, ran
             d = displacement[label]
             length = float(np.linalg.norm(d[:2]))
             if length > 0:
-                drawn = _sweep_layout.arrow_lengths([np.linalg.norm(d)], scale, window)[0][0]
+                drawn = _sweep_layout.arrow_lengths([length], scale, window)[0][0]
                 end = start + d[:2] / length * drawn
                 ax.add_patch(
                     FancyArrowPatch(
@@ -1278,7 +1278,8 @@ def _sweep_legend(
             arrow = f"arrow: travel in {scale * interval:.2g} s (motion x{scale:g})"
         else:
             arrow = f"arrow: motion between the sweeps x{scale:g}"
-        lengths = [np.linalg.norm(d) for d in displacement.values()]
+        lengths = np.array([np.linalg.norm(d[:2]) for d in displacement.values()])
+        lengths = lengths[lengths > 0]  # no arrow at all for these
         if np.any(_sweep_layout.arrow_lengths(lengths, scale, 2 * range_)[1]):
             arrow += f",\n  at least {_sweep_layout.ARROW_MIN * 2 * range_:.2g} m long"
         handles.append(Line2D([], [], color="black", marker=">", label=arrow))
