@@ -1114,10 +1114,10 @@ def plot_sweep(
     if len(outliers):
         ax.scatter(
             *points[outliers, :2].T,
-            color=OUTLIER_COLOR,
-            s=(0.8 * diameter) ** 2,
+            color="black",
+            s=(2.5 * diameter) ** 2,
             marker="x",
-            linewidths=0.4,
+            linewidths=0.5,
             rasterized=True,
             zorder=2,
         )
@@ -1269,7 +1269,7 @@ def _sweep_legend(
                 [],
                 linestyle="none",
                 marker="x",
-                color=OUTLIER_COLOR,
+                color="black",
                 label=f"outliers ({n_out:,} pts)",
             )
         )
