@@ -326,3 +326,35 @@ def test_plot_clusters_bev_of_a_z_up_sweep_is_from_above():
     assert (ax.get_xlabel(), ax.get_ylabel()) == ("x [m]", "y [m]")
     ax = plot_clusters(points, labels, ax=Figure().add_subplot(), view="bev", frame="camera")
     assert ax.get_ylabel().startswith("z, ahead of the camera")
+
+
+def test_an_opengl_camera_is_turned_into_opencv_exactly():
+    from scipy.spatial.transform import Rotation
+
+    from mmreg.plotting import _turned_to_opencv
+
+    rng = np.random.default_rng(3)
+    rotations = Rotation.random(4, random_state=1).as_matrix()
+    translations = rng.normal(size=(4, 3))
+    a = rng.normal(size=(50, 3))
+    labels = rng.integers(0, 4, 50)
+    b = np.einsum("nij,nj->ni", rotations[labels], a) + translations[labels]
+    turned_a, (turned_r, turned_t) = _turned_to_opencv(a, (rotations, translations))
+    turned_b, _ = _turned_to_opencv(b, None)
+    moved = np.einsum("nij,nj->ni", turned_r[labels], turned_a) + turned_t[labels]
+    np.testing.assert_allclose(moved, turned_b, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(turned_r), 1.0)
+
+
+def test_plot_result_draws_an_opengl_camera_frame_as_a_street_with_every_point_in_view():
+    from mmreg.plotting import plot_result
+
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(4.0, 30.0, 800)
+    opencv = np.c_[rng.uniform(-0.6, 0.6, 800) * depth, rng.uniform(-0.3, 0.3, 800) * depth, depth]
+    labels = np.repeat([0, 1], [600, 200])
+    fig = plot_result(opencv * [1.0, -1.0, -1.0], labels)  # as FlyingThings3D's HPLFlowNet dump
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles[:2] == ["bird's-eye view (metres)", "camera view (x / z, y / z)"]
+    camera_panel = fig.axes[1]
+    assert sum(len(c.get_offsets()) for c in camera_panel.collections) == 800

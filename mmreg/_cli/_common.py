@@ -404,81 +404,21 @@ def result_figure(
     interval=None,
     range_=None,
 ):
-    """The picture of a result, in the view that suits the frame of its points.
+    """The picture of a result: :func:`mmreg.plotting.plot_result` of its a-points."""
+    from mmreg.plotting import plot_result
 
-    ``frame`` is ``"camera"`` (z along the view), ``"lidar"`` (z up, the sensor at the
-    origin) or ``"auto"``: from where the points lie (:func:`mmreg._frames.detect_frame`),
-    never from the sign of z alone. ``view="auto"`` draws a camera frame as a street
-    (camera view and bird's-eye view), a LiDAR sweep from above (:func:`plot_sweep`,
-    ``range_`` metres around the sensor, speeds in m/s with ``interval`` seconds between
-    the sweeps), anything else in 3-D; ``view="bev"`` is from above for every frame but a
-    camera's. ``moving`` (one bool per cluster) names the clusters "moving" or "static";
-    the largest is the background.
-    """
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    from mmreg._frames import detect_frame, looks_down_minus_z
-    from mmreg.plotting import SWEEP_RANGE, plot_clusters, plot_street, plot_sweep
-
-    a = X[:, :3]
-    if frame == "auto":
-        frame = detect_frame(a)
-    if view == "auto":
-        view = {"camera": "street", "lidar": "bev"}.get(frame, "3d")
-    if view == "bev" and frame != "camera":
-        fig = Figure(figsize=(11.5, 8.0), layout="constrained")
-        plot_sweep(
-            a,
-            labels,
-            motions,
-            moving=moving,
-            interval=interval,
-            range_=SWEEP_RANGE if range_ is None else range_,
-            ax=fig.add_subplot(),
-        )
-        if title is not None:
-            fig.suptitle(title, fontsize=11)
-        return fig
-    if frame == "camera" and view in ("street", "bev", "camera") and looks_down_minus_z(a):
-        # OpenGL's camera (y up, looking down -z): turned about x into OpenCV's, which the
-        # street, bird's-eye and camera views draw.
-        flip = np.array([1.0, -1.0, -1.0])
-        a = a * flip
-        rotations, translations = (np.asarray(m, dtype=float) for m in motions)
-        motions = (rotations * flip[:, None] * flip[None, :], translations * flip)
-    names = None
-    reference = background_label(labels)
-    if moving is not None:
-        names = {
-            j: f"cluster {j}: " + ("background" if j == reference else "moving" if m else "static")
-            for j, m in enumerate(np.asarray(moving, dtype=bool).tolist())
-        }
-    if view == "street":
-        fig = Figure(figsize=(13, 5.8))
-        plot_street(
-            a, labels, motions=motions, camera=camera, fig=fig, title=title, label_names=names
-        )
-        return fig
-    fig = Figure(figsize=(10, 7), layout="constrained")
-    ax = fig.add_subplot(projection="3d" if view == "3d" else None)
-    # The largest cluster is the reference of "moving": drawn as the background, and the
-    # arrows show the motions relative to it (none for a cluster moving with it).
-    plot_clusters(
-        a,
+    return plot_result(
+        X[:, :3],
         labels,
-        ax=ax,
+        motions,
+        moving=moving,
         view=view,
-        motions=motions,
-        relative_to=reference,
+        frame=frame,
         camera=camera,
-        label_names=names,
-        background=True,
-        frame=frame or "auto",
+        interval=interval,
+        range_=range_,
+        title=title,
     )
-    if title is not None:
-        fig.suptitle(title, fontsize=11)
-    return fig
 
 
 def _nearest_existing(path):
