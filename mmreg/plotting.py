@@ -892,6 +892,18 @@ _GROUND_GREY, _TALL_GREY, _TALL = 0.74, 0.3, 4.0
 _SWEEP_LEGEND_ENTRIES = 14
 
 
+def _static_reference(labels, moving, n_clusters):
+    """The static world, reference of the motions: the largest cluster ``moving`` leaves
+    still (the largest of all when ``moving`` is None or leaves none still)."""
+    ids, _ = _ranked(labels)
+    if moving is not None:
+        still = ~np.asarray(moving, dtype=bool).ravel()[:n_clusters]
+        candidates = [k for k in ids.tolist() if k < len(still) and still[k]]
+        if candidates:
+            return candidates[0]
+    return _background_label(labels, True)
+
+
 def _moving_flags(moving, n_clusters, reference):
     """One bool per cluster: the given ``moving``, else every cluster but the reference."""
     if moving is None:
@@ -1011,15 +1023,15 @@ def plot_sweep(
     points : array-like of shape (n, 3)
         The points of the first sweep (the a-points), z up.
     labels : array-like of shape (n,)
-        Cluster of every point, ``-1`` for outliers. The largest cluster is the static
-        world, the reference of every motion.
+        Cluster of every point, ``-1`` for outliers. The largest cluster (of those not
+        ``moving``) is the static world, the reference of every motion.
     motions : (rotations, translations), default=None
         Arrays ``(K, 3, 3)`` and ``(K, 3)`` indexed by label (``b = R a + t``): the arrows
         and speeds. None: outlines only.
     moving : array-like of bool, default=None
         One per cluster (as in ``mmreg register``'s summary): the moving clusters are
-        coloured, the others drawn with the static world. None: every cluster but the
-        largest is moving.
+        coloured, the others drawn with the static world, the largest of which is the
+        reference of the motions. None: every cluster but the largest is moving.
     interval : float, default=None
         Seconds between the two sweeps: speeds in m/s (else in metres per frame) and the
         arrows' legend in seconds of travel.
@@ -1073,8 +1085,8 @@ def plot_sweep(
         raise ValueError(f"interval must be a positive number of seconds; got {interval!r}.")
     center = np.asarray(center, dtype=float).reshape(2)
     ax = _sweep_axes(ax)
-    reference = _background_label(labels, True)
     n_clusters = int(labels.max(initial=-1)) + 1
+    reference = _static_reference(labels, moving, n_clusters)
     if motions is not None and len(motions[0]) < n_clusters:
         raise ValueError(f"motions must have one per cluster, {n_clusters}; got {len(motions[0])}.")
     flags = _moving_flags(moving, n_clusters, reference)

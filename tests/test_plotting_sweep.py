@@ -358,3 +358,25 @@ def test_plot_result_draws_an_opengl_camera_frame_as_a_street_with_every_point_i
     assert titles[:2] == ["bird's-eye view (metres)", "camera view (x / z, y / z)"]
     camera_panel = fig.axes[1]
     assert sum(len(c.get_offsets()) for c in camera_panel.collections) == 800
+
+
+def test_the_static_world_is_the_largest_cluster_left_still_even_when_smaller():
+    points, labels = _sweep()
+    labels = np.where(labels == 0, 3, labels)  # the static world keeps its points ...
+    labels[:4000] = 0  # ... but the largest cluster is now a moving one (label 0)
+    ego = (_yaw(0.2), np.array([0.5, 0.0, 0.0]))
+    r0, t0 = ego
+    rotations = np.stack([r0, r0, r0, r0])
+    shifts = np.array([[0.0, 0.4, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    translations = shifts @ r0.T + t0
+    texts = _legend_texts(
+        plot_sweep(
+            points,
+            labels,
+            (rotations, translations),
+            moving=[True, True, True, False],
+            interval=INTERVAL,
+        )
+    )
+    assert "cluster 0: 4.0 m/s (4,000 pts)" in texts  # relative to cluster 3, not to itself
+    assert "cluster 1: 10.0 m/s (300 pts)" in texts
