@@ -21,9 +21,15 @@ HELP = "redraw the picture of a result directory"
 DESCRIPTION = """\
 Redraw the picture of a result directory (of "mmreg register" or "mmreg demo --out") from
 its labels.npy, motions.json and correspondences (its X.npy, else the input file named in
-its run.json, which must still hold the same correspondences): the a-points coloured by
-cluster (the largest, the background, in sand; outliers small and grey) and an arrow per
-cluster for its motion.
+its run.json, which must still hold the same correspondences), in the view the frame of
+the points calls for (--frame, else read from where they lie, not from the sign of z): a
+LiDAR sweep (z up, the sensor at the origin, points all around) from above, R metres
+around the sensor (--range, default 50), the static world grey by height, each moving
+cluster coloured in its oriented box with an arrow lengthened by the round factor the
+legend states and its speed (m/s with --interval or run.json's, else metres per frame);
+a camera frame (z along the view, every point in front) as a street, camera view and
+bird's-eye view (the largest cluster, the background, in sand; outliers small and grey);
+anything else in 3-D.
 Written to --out, by default RESULT_DIR/result.png (replacing it); the format follows the
 extension of --out (.png, .pdf, .svg, .eps, .jpg, ...). An existing --out other than
 RESULT_DIR/result.png is replaced only with --overwrite.
