@@ -126,8 +126,3 @@ def speed_text(displacement, interval=None):
     if interval is not None:
         return f"{displacement / interval:.1f} m/s"
     return f"{displacement:.2f} m/frame"
-
-
-def ring_step(half_width):
-    """Distance between range rings: a round number, about five rings to the window's edge."""
-    return nice_floor(half_width / 4.0)

@@ -950,28 +950,6 @@ def _points_per_metre(ax, half_width):
     return side * 72.0 / (2.0 * half_width)
 
 
-def _range_rings(ax, center, half_width):
-    from matplotlib.patches import Circle
-
-    step = _sweep_layout.ring_step(half_width)
-    radius = step
-    while radius <= half_width * np.sqrt(2.0):
-        ax.add_patch(
-            Circle(center, radius, fill=False, lw=0.6, ls=(0, (4, 4)), color="0.6", zorder=0.5)
-        )
-        if radius <= half_width * 0.98:
-            ax.annotate(
-                f"{radius:g} m",
-                (center[0] + radius * np.cos(np.pi / 4), center[1] + radius * np.sin(np.pi / 4)),
-                fontsize=6.5,
-                color="0.45",
-                ha="left",
-                va="bottom",
-                zorder=0.6,
-            )
-        radius += step
-
-
 def _sensor(ax, center, half_width):
     from matplotlib.patches import Polygon
 
