@@ -433,51 +433,34 @@ def render_png(fig, dpi=110):
     return render_picture(fig, "png", dpi)
 
 
-def result_figure(X, labels, motions, *, moving=None, view="auto", title=None, camera=None):
-    """The picture of a result: a street layout for camera-frame data, else a 3-D view.
+def result_figure(
+    X,
+    labels,
+    motions,
+    *,
+    moving=None,
+    view="auto",
+    title=None,
+    camera=None,
+    frame="auto",
+    interval=None,
+    range_=None,
+):
+    """The picture of a result: :func:`mmreg.plotting.plot_result` of its a-points."""
+    from mmreg.plotting import plot_result
 
-    ``moving`` (one bool per cluster) names the clusters "moving" or "static" in the
-    legend; the largest is "background".
-    """
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    from mmreg.plotting import plot_clusters, plot_street
-
-    a = X[:, :3]
-    names = None
-    reference = background_label(labels)
-    if moving is not None:
-        names = {
-            j: f"cluster {j}: " + ("background" if j == reference else "moving" if m else "static")
-            for j, m in enumerate(np.asarray(moving, dtype=bool).tolist())
-        }
-    if view == "auto":
-        view = "street" if np.all(a[:, 2] > 0) else "3d"
-    if view == "street":
-        fig = Figure(figsize=(13, 5.8))
-        plot_street(
-            a, labels, motions=motions, camera=camera, fig=fig, title=title, label_names=names
-        )
-        return fig
-    fig = Figure(figsize=(10, 7), layout="constrained")
-    ax = fig.add_subplot(projection="3d" if view == "3d" else None)
-    # The largest cluster is the reference of "moving": drawn as the background, and the
-    # arrows show the motions relative to it (none for a cluster moving with it).
-    plot_clusters(
-        a,
+    return plot_result(
+        X[:, :3],
         labels,
-        ax=ax,
+        motions,
+        moving=moving,
         view=view,
-        motions=motions,
-        relative_to=reference,
+        frame=frame,
         camera=camera,
-        label_names=names,
-        background=True,
+        interval=interval,
+        range_=range_,
+        title=title,
     )
-    if title is not None:
-        fig.suptitle(title, fontsize=11)
-    return fig
 
 
 def _nearest_existing(path):

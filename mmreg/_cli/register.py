@@ -345,8 +345,8 @@ def add_arguments(parser):
         choices=VIEWS,
         default="auto",
         help="result.png: 'street' (camera and bird's-eye views, for points in a camera "
-        "frame: x right, y down, z forward) or one plotting view; 'auto': street when "
-        "every a-point has z > 0, else 3d",
+        "frame: x right, y down, z forward), 'bev' (from above) or one plotting view; "
+        "'auto': street for a camera frame, bev for a z-up LiDAR sweep, else 3d",
     )
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no table")
     parser.add_argument(
@@ -701,6 +701,7 @@ def register(
                 view=args.view,
                 title=title,
                 camera=camera,
+                interval=getattr(args, "interval", None),
             )
             png = render_png(figure)
     if args.out is not None:

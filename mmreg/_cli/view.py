@@ -1,6 +1,7 @@
 """``mmreg view``: redraw the picture of a result directory."""
 
 import argparse
+import json
 from pathlib import Path
 
 from mmreg._cli._common import (
@@ -17,8 +18,15 @@ from mmreg._cli.register import VIEWS
 NAME = "view"
 HELP = "redraw the picture of a result directory, or of a job of 'mmreg run'"
 DESCRIPTION = """\
-Redraw the picture of RESULT: the a-points coloured by cluster (the largest, the
-background, in sand; outliers small and grey) and an arrow per cluster for its motion.
+Redraw the picture of RESULT: its a-points by cluster and an arrow per cluster for its
+motion, in the view the frame of the points calls for (--frame, else read from where
+they lie, not from the sign of z): a LiDAR sweep (z up, the sensor at the origin, points
+all around) from above, R metres around the sensor (--range, default 50), the static
+world grey by height, each moving cluster coloured in its oriented box with an arrow
+lengthened by the round factor the legend states and its speed (m/s with --interval or
+run.json's, else metres per frame); a camera frame (z along the view, every point in
+front) as a street, camera view and bird's-eye view (the largest cluster, the
+background, in sand; outliers small and grey); anything else in 3-D.
 
 RESULT is one of
   - a result directory of "mmreg register" or "mmreg demo --out": its labels.npy,
@@ -45,6 +53,22 @@ def _dpi(text):
     return value
 
 
+def _positive(unit):
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number of {unit}; got {text!r}") from None
+        if not (value > 0 and value < float("inf")):
+            raise argparse.ArgumentTypeError(f"must be a positive number of {unit}; got {text}")
+        return value
+
+    return parse
+
+
+_metres, _seconds = _positive("metres"), _positive("seconds")
+
+
 def add_arguments(parser):
     parser.add_argument(
         "result_dir",
@@ -68,8 +92,33 @@ def add_arguments(parser):
         "--view",
         choices=VIEWS,
         default="auto",
-        help="'street' (camera and bird's-eye views) or one plotting view; 'auto': street "
-        "when every a-point has z > 0, else 3d",
+        help="'street' (camera and bird's-eye views), 'bev' (from above: a z-up sweep's x-y, "
+        "a camera frame's x-z) or one plotting view; 'auto': street for a camera frame, bev "
+        "for a LiDAR frame, else 3d",
+    )
+    parser.add_argument(
+        "--frame",
+        choices=("auto", "camera", "lidar"),
+        default="auto",
+        help="frame of the points: 'camera' (z along the view, every point in front), "
+        "'lidar' (z up, the sensor at the origin, points all around); 'auto': from where "
+        "the points lie",
+    )
+    parser.add_argument(
+        "--range",
+        dest="range_",
+        metavar="R",
+        type=_metres,
+        default=None,
+        help="a LiDAR sweep from above: the square R metres around the sensor (default 50)",
+    )
+    parser.add_argument(
+        "--interval",
+        metavar="SECONDS",
+        type=_seconds,
+        default=None,
+        help="seconds between the two sweeps, for speeds in m/s (default: run.json's, "
+        "else speeds in metres per frame)",
     )
     parser.add_argument("--title", default=None, help="title of the picture")
     parser.add_argument("--dpi", type=_dpi, default=110, help="resolution, dots per inch")
@@ -105,6 +154,10 @@ def run(args):
             f"{result.name}: {len(X):,} {what} -> {plural(len(rotations), 'cluster')} "
             f"({n_moving} moving), {int(np.sum(labels < 0)):,} outliers"
         )
+    interval = args.interval
+    if interval is None and result.path.is_dir() and (result.path / "run.json").exists():
+        with reading(result.path / "run.json"):  # the interval, when it has one
+            interval = json.loads((result.path / "run.json").read_text()).get("interval")
     fig = result_figure(
         X,
         labels,
@@ -113,6 +166,9 @@ def run(args):
         view=args.view,
         title=title,
         camera=result.camera,
+        frame=args.frame,
+        interval=interval,
+        range_=args.range_,
     )
     picture = render_picture(fig, fmt, dpi=args.dpi)
     with reading(out), mmio.atomic_write(out) as handle:
