@@ -108,10 +108,10 @@ def make_lidar_sweeps(
         ``a`` (n, 3) and ``sweep`` (m, 3): the two sweeps in their own sensor frames;
         ``labels`` (n,): 0 for the static world (road, buildings, poles, parked cars), k
         for the k-th moving car (a car hidden behind another has no point); ``ground``
-        (n,) and ``sweep_ground`` (m,): returns from the road; ``transforms`` (n_moving + 1, 4, 4): ``transforms[k]`` maps a point of
-        ``a`` with label k to where it is in the second sweep's frame (label 0: the
-        inverse of the ego motion); ``flow`` (n, 3): each point's motion into that frame;
-        ``interval``.
+        (n,) and ``sweep_ground`` (m,): returns from the road; ``transforms``
+        (n_moving + 1, 4, 4): ``transforms[k]`` maps a point of ``a`` with label k to
+        where it is in the second sweep's frame (label 0: the inverse of the ego
+        motion); ``flow`` (n, 3): each point's motion into that frame; ``interval``.
 
     Examples
     --------
