@@ -31,7 +31,7 @@ SECTIONS = [
     "Licence",
 ]
 # Words of hexadecimal digits that are names, not commits: Argoverse 2 log ids.
-HEX_NAMES = {"7fab2350", "adcf7d18", "0c6e62d7"}
+HEX_NAMES = {"7fab2350", "adcf7d18", "0c6e62d7", "03b13aa21f68"}
 
 
 def python_blocks(path):
