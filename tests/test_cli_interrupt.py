@@ -81,6 +81,7 @@ def test_ctrl_c_always_exits_130_and_leaves_nothing(tmp_path):
                 interrupted += 1
             code = process.wait(120)
             thread.join(10)
+            process.stderr.close()
             codes.append(code)
             stderr = "".join(lines)
             if code == 130:

@@ -12,6 +12,7 @@ from sklearn.cluster import DBSCAN
 
 from mmreg.datasets import make_scene
 from mmreg.init import DBSCANClustering
+from mmreg.init._dbscan import AllOutliersWarning
 
 HAS_OPEN3D = importlib.util.find_spec("open3d") is not None
 needs_open3d = pytest.mark.skipif(not HAS_OPEN3D, reason="Open3D is not installed")
@@ -114,7 +115,8 @@ def test_backend_resolution_and_errors():
 
 def test_all_noise():
     X = blobs(1, n=20)
-    init = DBSCANClustering(eps=1e-3, min_samples=2, backend="sklearn").fit(X)
+    with pytest.warns(AllOutliersWarning, match="found no cluster"):
+        init = DBSCANClustering(eps=1e-3, min_samples=2, backend="sklearn").fit(X)
     assert init.n_clusters_ == 0 and np.all(init.labels_ == -1)
     assert init.transform(X).shape == (20, 0)
 

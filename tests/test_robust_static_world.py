@@ -11,6 +11,7 @@ too.
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from sklearn.exceptions import ConvergenceWarning
 
 from mmreg import MultiModelRegistration
 from mmreg.metrics import objects_found
@@ -91,7 +92,8 @@ def test_without_the_static_world_step_the_islands_stay_apart():
     est = MultiModelRegistration(
         tau=5.0, variant="sweep", random_state=0, skip_steps=("static_world",)
     )
-    est.fit(X)
+    with pytest.warns(ConvergenceWarning):  # without a static world the pieces never settle
+        est.fit(X)
     assert est.static_cluster_ == -1
     assert est.n_clusters_ >= 12
 
