@@ -35,6 +35,8 @@ _COARSE_NEIGHBOURS = 10
 _COARSE_TOL = 1e-3
 _FINE_TOL = 1e-5
 _MAD_TO_SIGMA = 1.4826
+# The residual scale is measured on at most about this many of the first sweep's points.
+_RESIDUAL_POINTS = 20000
 # GICP needs at least this many points on each side (a covariance needs 3, a motion 6).
 _MIN_POINTS = 10
 
@@ -118,7 +120,9 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
         ``points @ rotation.T + translation`` lies on ``sweep`` where the world is static.
     residual_scale : float
         Robust scale (1.4826 times the median absolute value) of the point-to-plane
-        residuals of the fine stage's matched points, in the points' units.
+        residuals of the first sweep's points (up to about 20,000 of them, evenly
+        strided) from the second sweep's fine voxel centres, those within the fine
+        reach, in the points' units.
 
     Raises
     ------
@@ -211,7 +215,10 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
             translation_epsilon=tolerance,
         )
         motion = np.asarray(result.T_target_source)
-    sigma = _residual_scale(fine_points[1], fine[0][0], fine[0][1], motion, _FINE_REACH)
+    # The residuals of the sweep's own points (a voxel's centre averages their noise away),
+    # every k-th one for a bounded cost.
+    stride = -(-len(source_all) // _RESIDUAL_POINTS)
+    sigma = _residual_scale(source_all[::stride], fine[0][0], fine[0][1], motion, _FINE_REACH)
     rotation = motion[:3, :3].copy()
     # Back from the centred, scaled frame: x' = R (x - o) / s + t  ->  y = R x + ...
     translation = scale * motion[:3, 3] + origin - rotation @ origin
