@@ -7,11 +7,14 @@ point-to-plane ICP (``mmreg._icp.multi_body_icp``) and KISS-ICP on real Argovers
 and on ray-cast street sweeps (``benchmarks/ego_motion.py``): it was the most accurate.
 
 Every length is a multiple of the one length the caller gives, ``scale``: the points are
-divided by it before the engine sees them (small_gicp's convergence test and the
-Levenberg-Marquardt damping are in absolute units), so scaled inputs give the same
-motion, its translation scaled. A displacement of up to ``max_displacement`` is found from
-the identity by halving the correspondence distance from ``max_displacement`` down to the
-fine one, each stage on a voxel grid a quarter of its reach, started from the last.
+centred and divided by it before the engine sees them (small_gicp's convergence test and
+its optimiser's damping are in absolute units), so scaled inputs give the same motion, its
+translation scaled (to 1e-9 for scales from 1e-3 to 1e3: tests/test_ego_motion.py).
+
+A displacement of up to ``max_displacement`` is found from the identity by halving the
+correspondence distance from ``max_displacement`` down to the fine one, each stage on a
+voxel grid a quarter of its reach, started from the last. The ground is kept: it holds
+roll, pitch and height.
 """
 
 import numbers
@@ -39,6 +42,8 @@ _MAD_TO_SIGMA = 1.4826
 _RESIDUAL_POINTS = 20000
 # GICP needs at least this many points on each side (a covariance needs 3, a motion 6).
 _MIN_POINTS = 10
+# small_gicp's voxel grid drops points more than 2**20 voxels from the origin.
+_MAX_VOXELS = 2**20
 
 
 def _check_points(points, name):
@@ -127,8 +132,9 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
     Raises
     ------
     ValueError
-        When a point set is not ``(n, 3)`` real and finite with at least 10 points, or a
-        length is not positive and finite.
+        When a point set is not ``(n, 3)`` real and finite with at least 10 points (and
+        10 voxels of ``scale / 20``), a length is not positive and finite, or ``scale``
+        is out of proportion with the points (more than 52,428 scales across).
     ImportError
         When small_gicp is not installed.
 
@@ -164,14 +170,21 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
     sweep = _check_points(sweep, "sweep")
     scale = _check_length(scale, "scale")
     max_displacement = _check_length(max_displacement, "max_displacement", allow_none=True)
-    if isinstance(max_iter, bool) or not isinstance(max_iter, numbers.Integral) or max_iter < 1:
-        raise ValueError(f"max_iter must be a positive integer; got {max_iter!r}.")
+    for name, value in (("max_iter", max_iter), ("workers", workers)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+            raise ValueError(f"{name} must be a positive integer; got {value!r}.")
     reach = (scale if max_displacement is None else max_displacement) / scale
     # Work in units of ``scale`` about the first sweep's centre, so that every length and
     # tolerance inside the engine is relative (and far sweeps keep their precision).
     origin = points.mean(axis=0)
     source_all = (points - origin) / scale
     target_all = (sweep - origin) / scale
+    extent = max(np.abs(source_all).max(), np.abs(target_all).max())
+    if extent >= _MAX_VOXELS * _FINE_VOXEL:
+        raise ValueError(
+            f"the sweeps reach {extent:.3g} scales from their centre, more than "
+            f"{_MAX_VOXELS * _FINE_VOXEL:.0f}; is scale={scale!r} in the points' units?"
+        )
     # The fine clouds first; the coarse stages' voxel grids are drawn from them (a few
     # times fewer points than the sweeps).
     fine = [

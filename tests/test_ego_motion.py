@@ -150,6 +150,8 @@ def test_residual_scale_is_the_first_sweep_s_noise():
         (None, None, {"scale": True}, "scale must be a positive finite length"),
         (None, None, {"max_displacement": -1.0}, "max_displacement must be a positive"),
         (None, None, {"max_iter": 0}, "max_iter must be a positive integer"),
+        (None, None, {"workers": 1.5}, "workers must be a positive integer"),
+        (None, None, {"scale": 1e-4}, "is scale=0.0001 in the points' units"),
         (None, None, {"scale": 1e4}, "voxels of scale / 20"),
     ],
 )
