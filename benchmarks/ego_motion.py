@@ -288,7 +288,8 @@ def main(argv=None):
         "# Ego motion of two raw sweeps: mmreg beside small_gicp and KISS-ICP",
         "",
         "`python benchmarks/ego_motion.py --data ../shared/realdata` (one thread each; time: "
-        f"median of {args.repeats} interleaved runs on a shared 2-core machine). Static EPE: "
+        f"median of {args.repeats} interleaved runs on a 2-core machine shared with other jobs: "
+        "compare times within a pair, not across runs). Static EPE: "
         "mean distance between where the estimate and the truth put the static points (on "
         "the Argoverse 2 pairs the truth is the flow of the static points, itself within "
         "5 cm of one rigid motion).",
