@@ -113,9 +113,22 @@ def _further(sweep, shift, yaw):
     return sweep @ motion[:3, :3].T + motion[:3, 3], motion
 
 
-def real_pairs(root):
-    sys.path.insert(0, root)
+def _loader(root):
+    """The data folder's ``(list_scenes, load_scene)``, or None when it has no load.py."""
+    if not (Path(root) / "load.py").is_file():
+        print(f"skipping the real pairs: no {Path(root) / 'load.py'}")
+        return None
+    sys.path.insert(0, str(root))
     from load import list_scenes, load_scene
+
+    return list_scenes, load_scene
+
+
+def real_pairs(root):
+    loader = _loader(root)
+    if loader is None:
+        return
+    list_scenes, load_scene = loader
 
     available = list_scenes(root)
     for name, drop_ground in [
@@ -157,11 +170,10 @@ def object_rows(root, n_starts=8, min_points=150):
 
     from mmreg._icp import multi_body_icp, rotation_vectors_to_matrices
 
-    sys.path.insert(0, root)
-    from load import list_scenes, load_scene
-
-    if "av2_api_7fab2350" not in list_scenes(root):
+    loader = _loader(root)
+    if loader is None or "av2_api_7fab2350" not in loader[0](root):
         return []
+    load_scene = loader[1]
     scene = load_scene("av2_api_7fab2350", root=root)
     ids, counts = np.unique(scene.labels[scene.labels >= 1], return_counts=True)
     cars = ids[counts >= min_points]
