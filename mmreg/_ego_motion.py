@@ -20,6 +20,9 @@ roll, pitch and height.
 import numbers
 
 import numpy as np
+from scipy.spatial import cKDTree
+
+from mmreg._icp import SurfaceNormals
 
 __all__ = ["ego_motion"]
 
@@ -38,8 +41,11 @@ _COARSE_NEIGHBOURS = 10
 _COARSE_TOL = 1e-3
 _FINE_TOL = 1e-5
 _MAD_TO_SIGMA = 1.4826
-# The residual scale is measured on at most about this many of the first sweep's points.
-_RESIDUAL_POINTS = 20000
+# The residual scale is measured on at most about this many of the first sweep's points
+# (SweepRegistration's max_points), with multi_body_icp's normals and scan-line test.
+_RESIDUAL_POINTS = 5000
+_NORMAL_NEIGHBOURS = 10
+_MIN_FLATNESS = 0.2
 # GICP needs at least this many points on each side (a covariance needs 3, a motion 6).
 _MIN_POINTS = 10
 # small_gicp's voxel grid drops points more than 2**20 voxels from the origin.
@@ -83,17 +89,24 @@ def _reaches(max_displacement):
     return reaches + [_FINE_REACH]
 
 
-def _residual_scale(source, target, tree, motion, reach):
-    """Robust scale (1.4826 MAD) of the point-to-plane residuals of the matched points."""
-    moved = source @ motion[:3, :3].T + motion[:3, 3]
-    nearest, squared = tree.batch_nearest_neighbor_search(moved)
-    nearest, squared = np.asarray(nearest), np.asarray(squared)
-    matched = (nearest >= 0) & (squared <= reach**2)
-    if not matched.any():
+def _residual_scale(points, sweep, motion, reach):
+    """Robust scale (1.4826 MAD) of the point-to-plane residuals of ``points`` on ``sweep``.
+
+    Measured as ``multi_body_icp`` measures a cluster's (the raw sweep's PCA normals of 10
+    neighbours, matches within ``reach``, none on a scan line), so that the ego motion's
+    scale and the islands' stay comparable.
+    """
+    tree = cKDTree(sweep)
+    normals = SurfaceNormals(sweep, tree, _NORMAL_NEIGHBOURS)
+    moved = points @ motion[:3, :3].T + motion[:3, 3]
+    distance, nearest = tree.query(moved, distance_upper_bound=reach)
+    matched = np.flatnonzero(distance <= reach)
+    normal, _, flatness = normals(nearest[matched])
+    flat = flatness >= _MIN_FLATNESS
+    if not flat.any():
         return float("nan")
-    normals = np.asarray(target.normals())[nearest[matched], :3]
-    points = np.asarray(target.points())[nearest[matched], :3]
-    residual = np.einsum("ni,ni->n", normals, moved[matched] - points)
+    matched = matched[flat]
+    residual = np.einsum("ni,ni->n", normal[flat], moved[matched] - sweep[nearest[matched]])
     return _MAD_TO_SIGMA * float(np.median(np.abs(residual)))
 
 
@@ -125,9 +138,10 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
         ``points @ rotation.T + translation`` lies on ``sweep`` where the world is static.
     residual_scale : float
         Robust scale (1.4826 times the median absolute value) of the point-to-plane
-        residuals of the first sweep's points (up to about 20,000 of them, evenly
-        strided) from the second sweep's fine voxel centres, those within the fine
-        reach, in the points' units.
+        residuals of the first sweep's points (up to about 5,000 of them, evenly
+        strided) on the second sweep (its PCA normals of 10 neighbours), those within
+        ``scale / 5`` and not on a scan line, as ``multi_body_icp`` measures a cluster's;
+        in the points' units.
 
     Raises
     ------
@@ -231,7 +245,7 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
     # The residuals of the sweep's own points (a voxel's centre averages their noise away),
     # every k-th one for a bounded cost.
     stride = -(-len(source_all) // _RESIDUAL_POINTS)
-    sigma = _residual_scale(source_all[::stride], fine[0][0], fine[0][1], motion, _FINE_REACH)
+    sigma = _residual_scale(source_all[::stride], target_all, motion, _FINE_REACH)
     rotation = motion[:3, :3].copy()
     # Back from the centred, scaled frame: x' = R (x - o) / s + t  ->  y = R x + ...
     translation = scale * motion[:3, 3] + origin - rotation @ origin
