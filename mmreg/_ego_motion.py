@@ -89,17 +89,17 @@ def _reaches(max_displacement):
     return reaches + [_FINE_REACH]
 
 
-def _residual_scale(points, sweep, motion, reach):
+def _residual_scale(points, sweep, rotation, translation, reach, normals):
     """Robust scale (1.4826 MAD) of the point-to-plane residuals of ``points`` on ``sweep``.
 
     Measured as ``multi_body_icp`` measures a cluster's (the raw sweep's PCA normals of 10
     neighbours, matches within ``reach``, none on a scan line), so that the ego motion's
-    scale and the islands' stay comparable.
+    scale and the islands' stay comparable. ``normals``: the sweep's SurfaceNormals or None.
     """
-    tree = cKDTree(sweep)
-    normals = SurfaceNormals(sweep, tree, _NORMAL_NEIGHBOURS)
-    moved = points @ motion[:3, :3].T + motion[:3, 3]
-    distance, nearest = tree.query(moved, distance_upper_bound=reach)
+    if normals is None:
+        normals = SurfaceNormals(sweep, cKDTree(sweep), _NORMAL_NEIGHBOURS)
+    moved = points @ rotation.T + translation
+    distance, nearest = normals.tree.query(moved, distance_upper_bound=reach)
     matched = np.flatnonzero(distance <= reach)
     normal, _, flatness = normals(nearest[matched])
     flat = flatness >= _MIN_FLATNESS
@@ -110,7 +110,9 @@ def _residual_scale(points, sweep, motion, reach):
     return _MAD_TO_SIGMA * float(np.median(np.abs(residual)))
 
 
-def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, workers=1):
+def ego_motion(
+    points, sweep, *, scale, max_displacement=None, max_iter=30, workers=1, sweep_normals=None
+):
     """The rigid motion that carries one raw sweep onto the next, found from the identity.
 
     Parameters
@@ -131,6 +133,10 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
         Largest number of Gauss-Newton steps of each stage.
     workers : int, default=1
         Threads of small_gicp.
+    sweep_normals : SurfaceNormals or None, default=None
+        ``mmreg._icp.SurfaceNormals(sweep, cKDTree(sweep), 10)`` where the caller keeps
+        one (``SweepRegistration`` does): the residual scale then reuses its KD-tree and
+        normals. None: built here.
 
     Returns
     -------
@@ -188,6 +194,13 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
     sweep = _check_points(sweep, "sweep")
     scale = _check_length(scale, "scale")
     max_displacement = _check_length(max_displacement, "max_displacement", allow_none=True)
+    if sweep_normals is not None and (
+        not isinstance(sweep_normals, SurfaceNormals) or sweep_normals.points.shape != sweep.shape
+    ):
+        raise ValueError(
+            "sweep_normals must be None or the SurfaceNormals of sweep (same shape); got "
+            f"{type(sweep_normals).__name__}."
+        )
     for name, value in (("max_iter", max_iter), ("workers", workers)):
         if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
             raise ValueError(f"{name} must be a positive integer; got {value!r}.")
@@ -246,11 +259,13 @@ def ego_motion(points, sweep, *, scale, max_displacement=None, max_iter=30, work
             translation_epsilon=tolerance,
         )
         motion = np.asarray(result.T_target_source)
-    # The residuals of the sweep's own points (a voxel's centre averages their noise away),
-    # every k-th one for a bounded cost.
-    stride = -(-len(source_all) // _RESIDUAL_POINTS)
-    sigma = _residual_scale(source_all[::stride], target_all, motion, _FINE_REACH)
     rotation = motion[:3, :3].copy()
-    # Back from the centred, scaled frame: x' = R (x - o) / s + t  ->  y = R x + ...
+    # Back from the centred, scaled frame: (y - o) / s = R (x - o) / s + t'.
     translation = scale * motion[:3, 3] + origin - rotation @ origin
-    return rotation, translation, scale * sigma
+    # The residuals of the raw points (a voxel's centre averages their noise away), every
+    # k-th one for a bounded cost.
+    stride = -(-len(points) // _RESIDUAL_POINTS)
+    sigma = _residual_scale(
+        points[::stride], sweep, rotation, translation, _FINE_REACH * scale, sweep_normals
+    )
+    return rotation, translation, sigma

@@ -128,6 +128,22 @@ def test_order_and_sizes_of_the_sweeps_do_not_matter():
     np.testing.assert_allclose(shuffled[1], translation, atol=1e-9)
 
 
+def test_the_caller_s_sweep_normals_give_the_same_answer():
+    from scipy.spatial import cKDTree
+
+    from mmreg._icp import SurfaceNormals
+
+    a, sweep, _, _ = sweeps([0.0, 0.0, 0.03], [-2.0, 0.5, 0.0], n=5000, m=6000)
+    alone = ego_motion(a, sweep, scale=SCALE)
+    given_normals = SurfaceNormals(sweep, cKDTree(sweep), 10)
+    reused = ego_motion(a, sweep, scale=SCALE, sweep_normals=given_normals)
+    np.testing.assert_array_equal(reused[0], alone[0])
+    np.testing.assert_array_equal(reused[1], alone[1])
+    assert reused[2] == alone[2]
+    with pytest.raises(ValueError, match="sweep_normals must be None or the SurfaceNormals"):
+        ego_motion(sweep, a, scale=SCALE, sweep_normals=given_normals)
+
+
 def test_residual_scale_is_the_first_sweep_s_noise():
     rng = np.random.default_rng(3)
     a = courtyard(20000, rng)
