@@ -1,5 +1,6 @@
 """mmreg._ego_motion.ego_motion: two raw sweeps' rigid motion, from the identity."""
 
+import functools
 import importlib.util
 import sys
 from pathlib import Path
@@ -108,11 +109,16 @@ def test_ray_cast_street_sweeps_half_a_second_apart():
     assert np.linalg.norm(found_translation - pair.translation) < 0.02
 
 
+@functools.cache
+def _unscaled():
+    a, sweep, _, _ = sweeps([0.0, 0.01, 0.03], [-2.0, 0.5, 0.0], n=5000, m=6000)
+    return a, sweep, ego_motion(a, sweep, scale=SCALE, max_displacement=6.0)
+
+
 @given(st.floats(min_value=-3.0, max_value=3.0))
 def test_scaled_points_and_lengths_give_the_same_motion(log10_scale):
     s = 10.0**log10_scale
-    a, sweep, _, _ = sweeps([0.0, 0.01, 0.03], [-2.0, 0.5, 0.0], n=5000, m=6000)
-    rotation, translation, sigma = ego_motion(a, sweep, scale=SCALE, max_displacement=6.0)
+    a, sweep, (rotation, translation, sigma) = _unscaled()
     scaled = ego_motion(a * s, sweep * s, scale=SCALE * s, max_displacement=6.0 * s)
     np.testing.assert_allclose(scaled[0], rotation, rtol=0, atol=1e-9)
     np.testing.assert_allclose(scaled[1] / s, translation, rtol=0, atol=1e-9)
