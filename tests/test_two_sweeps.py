@@ -189,7 +189,7 @@ def test_cli_registers_two_raw_sweeps_and_refines_a_flow(tmp_path):
 
     a, b, labels, rotations, translations, sweep = make_pair(n=3000, m=4000)
     _write_pair(tmp_path, a, b, sweep)
-    common = ["--tau", "2", "-q", "--seed", "0"]
+    common = ["--tau", "2", "--max-distance", "1", "--island-radius", "0.5", "-q", "--seed", "0"]
     raw = ["register", str(tmp_path / "a.ply"), "--sweep", str(tmp_path / "sweep.ply")]
     assert main([*raw, "--out", str(tmp_path / "raw"), *common]) == 0
     refined = [*raw, "--flow", str(tmp_path / "flow.npy"), "--out", str(tmp_path / "ref")]

@@ -7,8 +7,11 @@ points alone as a user's sweeps come.
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sklearn.metrics import adjusted_rand_score
 
-from mmreg import SweepRegistration
+from mmreg import MultiModelRegistration, SweepRegistration
 from mmreg._ground import ground_mask, has_ground, is_z_up_sweep
 from mmreg.datasets import make_lidar_sweeps
 from mmreg.metrics import objects_found
@@ -116,3 +119,25 @@ def test_scaling_the_points_and_tau_finds_the_same_ground():
     street = make_lidar_sweeps(n_beams=16, n_azimuths=512, random_state=0)
     metres = ground_mask(street.a)
     np.testing.assert_array_equal(ground_mask(street.a * 1000.0, tau=5000.0), metres)
+
+
+@settings(max_examples=4, deadline=None)
+@given(exponent=st.floats(-3.0, 3.0))
+def test_scaling_the_sweeps_and_tau_gives_the_same_labels(exponent):
+    """No hidden unit: the sweeps in any unit s, with tau scaled by s, give the same labels."""
+    scale = 10.0**exponent
+    street = _small_street()
+    metres = _fit_scaled(street, 1.0)
+    scaled = _fit_scaled(street, scale)
+    assert adjusted_rand_score(metres.labels_, scaled.labels_) == 1.0
+    np.testing.assert_allclose(scaled.flow_ / scale, metres.flow_, atol=1e-6)
+
+
+def _small_street():
+    return make_lidar_sweeps(n_moving=2, n_beams=16, n_azimuths=512, random_state=0)
+
+
+def _fit_scaled(street, scale):
+    inner = MultiModelRegistration(variant="sweep", tau=5.0 * scale, random_state=0)
+    est = SweepRegistration(inner, random_state=0)
+    return est.fit(street.a * scale, sweep=street.sweep * scale)

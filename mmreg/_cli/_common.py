@@ -696,7 +696,10 @@ def input_record(X, input, target=None, flow=None):
     """
     paths = {"input": input, "target": target, "flow": flow}
     record = {f"{name}_path": str(Path(path).resolve()) for name, path in paths.items() if path}
-    files = {name: file_digest(path) for name, path in paths.items() if path}
+    # A folder (a ROS 2 bag, a KITTI sequence) has no bytes of its own to digest.
+    files = {
+        name: file_digest(path) for name, path in paths.items() if path and Path(path).is_file()
+    }
     return record | {"input_sha256": correspondences_digest(X), "files_sha256": files}
 
 
@@ -712,7 +715,7 @@ def _changed_inputs(run, folder):
         path = run.get(f"{name}_path")
         if not path:
             continue
-        if not Path(path).is_file():
+        if not Path(path).exists():
             missing.append(path)
         elif name in recorded and file_digest(path) != recorded[name]:
             changed.append(path)

@@ -163,6 +163,19 @@ def resolve_tau(tau, sweeps):
     return TAU_SWEEPS if sweeps else TAU_CORRESPONDENCES
 
 
+def _length(text):
+    """A positive length, or ``auto``."""
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length or 'auto'; got {text!r}") from None
+    if not (0 < value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive length or 'auto'; got {text}")
+    return value
+
+
 def _tau(text):
     if text.lower() in ("none", "auto"):
         return None if text.lower() == "none" else "auto"
@@ -234,6 +247,36 @@ def add_arguments(parser):
         help="the second sweep as its own points (any point file, any size, any order): "
         "refines the motions on it, or, with points alone as INPUT, registers the two raw "
         "sweeps",
+    )
+    sweeps = parser.add_argument_group(
+        "two sweeps", "lengths in the units of the points; 'auto' derives them from --tau"
+    )
+    sweeps.add_argument(
+        "--ground",
+        choices=("auto", "keep", "drop"),
+        default="auto",
+        help="two raw sweeps: the ground found in a z-up sweep joins the static world "
+        "(auto), is registered like any point (keep), or is left out and labelled -1 (drop)",
+    )
+    sweeps.add_argument(
+        "--max-distance",
+        type=_length,
+        default="auto",
+        help="an ICP matches a point to the second sweep only within this distance "
+        "(auto: tau / 5, 1 m for LiDAR)",
+    )
+    sweeps.add_argument(
+        "--island-radius",
+        type=_length,
+        default="auto",
+        help="two raw sweeps: points this close share an island (auto: tau / 10)",
+    )
+    sweeps.add_argument(
+        "--max-displacement",
+        type=_length,
+        default="auto",
+        help="two raw sweeps: the largest motion of an object relative to the static world "
+        "between the sweeps (auto: 0.6 tau, 3 m for LiDAR: 30 m/s at 10 Hz)",
     )
     sequence = parser.add_argument_group(
         "sequences", "INPUT a ROS bag, a KITTI sequence, an Argoverse 2 log or a folder of frames"
@@ -567,7 +610,7 @@ def read_capture_times(args, n, m):
     check_time_options(args)
     if getattr(args, "times", None) is None:
         interval = getattr(args, "interval", None) or getattr(args, "sweep_interval", None)
-        where = getattr(args, "sweep", None) or args.input
+        where = getattr(args, "sweep", None) or getattr(args, "input", None)
         timing = file_timing(
             getattr(args, "input_times", None),
             getattr(args, "sweep_file_times", None),
@@ -618,7 +661,15 @@ def _fit(X, init, args, steps, sweep=None, timing=None):
     if sweep is not None:
         # Two raw sweeps start from their islands unless --init names a clustering.
         raw_init = "islands" if args.init is None else "estimator"
-        estimator = SweepRegistration(estimator, raw_init=raw_init, random_state=args.seed)
+        estimator = SweepRegistration(
+            estimator,
+            raw_init=raw_init,
+            ground=getattr(args, "ground", "auto"),
+            max_distance=getattr(args, "max_distance", "auto"),
+            island_radius=getattr(args, "island_radius", "auto"),
+            max_displacement=getattr(args, "max_displacement", "auto"),
+            random_state=args.seed,
+        )
     params = {} if sweep is None else {"sweep": sweep} | (timing or {})
     name = "EM" if sweep is None else "EM and ICP on --sweep" + (" (deskewed)" if timing else "")
     with steps.step(name), reported_warnings():

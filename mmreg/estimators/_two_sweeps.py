@@ -28,8 +28,8 @@ from mmreg._grouping import group_bounds
 from mmreg._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg._island_motions import choose_island_motions, translation_starts
 from mmreg._islands import voxel_islands
-from mmreg._motion import moving_clusters, static_cluster
-from mmreg._slow_movers import beyond_spacing, slow_movers
+from mmreg._motion import _group_median, moving_clusters, static_cluster
+from mmreg._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
 from mmreg._validation import check_coordinate_range
 
 __all__ = ["SweepRegistration"]
@@ -45,6 +45,8 @@ _HYPOTHESIS_ITER = 15
 # ICP has converged when no step moves a cluster by more than this share of max_distance.
 _TOL = 1e-4
 _BIN = 0.25
+# The lengths of "auto" in units of the estimator's tau (LiDAR in metres: tau = 5).
+_LENGTHS_PER_TAU = {"max_distance": 0.2, "island_radius": 0.1, "max_displacement": 0.6}
 # Raw mode: a cluster whose motion moves its points off their own surfaces (relative to
 # the static world) by fewer than this many of the ego ICP's robust residual scales only
 # slides along them (see _join_slides).
@@ -104,7 +106,7 @@ def _check_timing(times, sweep_times, interval, n, m):
     return _check_times(times, n, "times"), _check_times(sweep_times, m, "sweep_times"), interval
 
 
-def _join_slides(a, labels, motions, static, sigma):
+def _join_slides(a, labels, motions, static, sigma, target):
     """The static world takes back every cluster that only slides along its own surfaces.
 
     A planar patch (a wall, a kerb, a strip of road) constrains only motion along its
@@ -114,7 +116,10 @@ def _join_slides(a, labels, motions, static, sigma):
     displacement ``M_k a - E a`` along each point's normal (PCA of its 10 nearest
     points of the first sweep). Below 3 robust residual scales of the ego-motion ICP
     (``sigma``, the same point-to-plane residual) the data cannot tell the cluster from
-    the static world: it joins it, with the static world's motion.
+    the static world: it joins it, with the static world's motion. So does a cluster
+    whose motion moves its points (median) by less than half the second sweep's sampling
+    spacing where they land (``target``: the second sweep and its cKDTree): no sweep can
+    show such a motion, whatever the noise.
 
     ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; returns the
     labels, the same arrays without the joined clusters, and the static world's new
@@ -128,17 +133,18 @@ def _join_slides(a, labels, motions, static, sigma):
     normals, _, _ = SurfaceNormals(a, tree, 10)(others)
     group = labels[others]
     points = a[others]
-    displacement = (
-        np.einsum("nij,nj->ni", rotations[group], points)
-        + translations[group]
-        - (points @ rotations[static].T + translations[static])
-    )
+    moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
+    displacement = moved - (points @ rotations[static].T + translations[static])
     along = np.einsum("ni,ni->n", np.nan_to_num(normals), displacement)
     n_clusters = len(rotations)
     counts = np.maximum(np.bincount(group, minlength=n_clusters), 1)
     evidence = np.sqrt(np.bincount(group, weights=along**2, minlength=n_clusters) / counts)
+    sweep, tree = target
+    _, _, spacing = _spacing_ratio(moved, tree, sweep)
+    departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
+    unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
     slides = np.bincount(group, minlength=n_clusters) > 0
-    slides &= evidence < _SLIDE_SCALES * sigma
+    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen
     if not slides.any():
         return labels, motions, static
     kept = ~slides
@@ -224,19 +230,21 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         moves it by 1-2 cm (different scan lines, occlusions). Raw mode refines all.
     max_icp_iter : int, default=30
         Gauss-Newton steps of every ICP.
-    max_distance : float, default=1.0
+    max_distance : float or "auto", default="auto"
         A point is matched to the second sweep only within this distance (units of the
-        points; 1 m suits LiDAR).
+        points). ``"auto"``: a fifth of the estimator's ``tau`` (1 m for LiDAR in metres
+        with ``tau=5``). Like every length here, it scales with ``tau``: nothing assumes
+        metres.
     max_points : int or None, default=5000
         Points per cluster used by the ICP (chosen at random); None: all.
-    island_radius : float, default=0.5
+    island_radius : float or "auto", default="auto"
         Raw mode: side of the voxels whose touching sets are the sweeps' islands (points
-        within this distance always share an island).
+        within this distance always share an island). ``"auto"``: a tenth of ``tau``.
     min_island_size : int, default=30
         Raw mode: smaller islands take the ego motion.
-    max_displacement : float, default=3.0
+    max_displacement : float or "auto", default="auto"
         Raw mode: largest motion of an object relative to the static world, between the
-        sweeps (3 m: 30 m/s at 10 Hz).
+        sweeps. ``"auto"``: ``0.6 tau`` (3 m with ``tau=5``: 30 m/s at 10 Hz).
     max_rounds : int, default=2
         Raw mode: most rounds of estimator and ICP.
     raw_init : {"islands", "estimator"}, default="islands"
@@ -246,7 +254,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         one); the same clusters as a Euclidean clustering on the shared Argoverse 2
         pairs in half the time, and the only way for the slow movers, which share
         islands with the static world, to start apart. ``"estimator"``: its own ``init``.
-    ground : {"auto", "keep"}, default="auto"
+    ground : {"auto", "keep", "drop"}, default="auto"
         Raw mode: what to do with the ground of the sweeps. ``"auto"``: when the first
         sweep is z-up (it spreads far wider than it is tall, see
         :func:`mmreg._ground.is_z_up_sweep`), the ground of both sweeps is found
@@ -257,8 +265,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         take the static world's label and motion. A sweep whose ground was removed
         before, or a scene without one, is registered as it is (the ground found must
         hold 6 % of the points and surround the sensor, see
-        :func:`mmreg._ground.has_ground`). ``"keep"``: the ground is registered like every other
-        point.
+        :func:`mmreg._ground.has_ground`). ``"drop"``: found the same way, the ground
+        is left out: its points are labelled -1 and take the static world's flow.
+        ``"keep"``: the ground is registered like every other point.
     random_state : int, RandomState instance or None, default=None
         Seeds the subsampling and an ``estimator`` whose ``random_state`` is None.
 
@@ -293,6 +302,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         The fitted ``estimator`` (last round).
     ego_motion_ : tuple of ndarray
         Raw mode: ``(R, t)`` of the ego-motion ICP.
+    max_distance_, island_radius_, max_displacement_ : float
+        The lengths used: the parameters, or what ``"auto"`` made of them.
     ground_mask_ : ndarray of shape (n_samples,) or None
         Raw mode: which points of the first sweep were taken for the ground (all in the
         static world); None when the ground was kept.
@@ -371,14 +382,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         "estimator": [HasMethods(["fit"]), None],
         "refine": [StrOptions({"moving", "all"})],
         "max_icp_iter": [Interval(Integral, 0, None, closed="left")],
-        "max_distance": [Interval(Real, 0, None, closed="neither")],
+        "max_distance": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "max_points": [Interval(Integral, 6, None, closed="left"), None],
-        "island_radius": [Interval(Real, 0, None, closed="neither")],
+        "island_radius": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "min_island_size": [Interval(Integral, 1, None, closed="left")],
-        "max_displacement": [Interval(Real, 0, None, closed="neither")],
+        "max_displacement": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "max_rounds": [Interval(Integral, 1, None, closed="left")],
         "raw_init": [StrOptions({"islands", "estimator"})],
-        "ground": [StrOptions({"auto", "keep"})],
+        "ground": [StrOptions({"auto", "keep", "drop"})],
         "random_state": ["random_state"],
     }
 
@@ -388,11 +399,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         *,
         refine="moving",
         max_icp_iter=30,
-        max_distance=1.0,
+        max_distance="auto",
         max_points=5000,
-        island_radius=0.5,
+        island_radius="auto",
         min_island_size=30,
-        max_displacement=3.0,
+        max_displacement="auto",
         max_rounds=2,
         raw_init="islands",
         ground="auto",
@@ -472,6 +483,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3)
         check_coordinate_range(X)
         rng = check_random_state(self.random_state)
+        self._resolve_lengths()
         if sweep is None and any(v is not None for v in (times, sweep_times, interval)):
             raise ValueError(
                 "times, sweep_times and interval deskew the ICP on the second sweep: pass "
@@ -529,6 +541,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         if X.shape[1] == 3:  # clusters joined or added for the ground are not the estimator's
             self.outlier_mask_ = labels < 0
             self.sigmas_ = sigmas
+            if self.ground == "drop" and self.ground_mask_ is not None and static >= 0:
+                dropped = a[self.ground_mask_]
+                moved = dropped @ rotations[static].T + translations[static]
+                self.flow_[self.ground_mask_] = moved - dropped
         self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
         return self
 
@@ -616,9 +632,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             sweep,
             tree=tree,
             normals=normals,
-            max_distance=self.max_distance,
+            max_distance=self.max_distance_,
             max_iter=self.max_icp_iter,
-            tol=_TOL * self.max_distance,
+            tol=_TOL * self.max_distance_,
         )
 
     def _deskewed_icp(
@@ -647,11 +663,13 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         # those in the clusters' moved bounding boxes grown by twice the ICP's reach
         # (the rounds move them far less).
         moved = np.einsum("nij,nj->ni", R[g], a[member]) + t[g]
-        margin = 2 * self.max_distance
+        margin = 2 * self.max_distance_
         low, high = group_bounds(moved, g, n_part)
         local = np.flatnonzero(_in_boxes(sweep, low - margin, high + margin))
         if not len(local):  # nothing to match: the ICP leaves the motions as they are
-            return multi_body_icp(a, group, R, t, sweep, max_distance=self.max_distance, max_iter=0)
+            return multi_body_icp(
+                a, group, R, t, sweep, max_distance=self.max_distance_, max_iter=0
+            )
         # A point nearer to another cluster (the static world's points all take part)
         # stays as it is.
         rest = np.flatnonzero((labels >= 0) & ~np.isin(labels, part))
@@ -684,7 +702,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     def _ego_motion(self, a, context):
         """The dominant motion: ICP of the whole first sweep from the identity, coarse to fine.
 
-        Returns the motion and its robust point-to-plane residual scale.
+        Returns the motion and its robust point-to-plane residual scale. (GICP,
+        :func:`mmreg._ego_motion.ego_motion`, is more accurate on real sweeps and finds
+        motions of several metres, but without a robust kernel it is pulled off where
+        moving objects make much of a scene; ``benchmarks/ego_motion.py`` compares them.)
         """
         sweep, tree, normals, rng, _ = context
         labels = np.zeros(len(a), dtype=np.intp)
@@ -701,9 +722,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 sweep,
                 tree=tree,
                 normals=normals,
-                max_distance=reach * self.max_distance,
+                max_distance=reach * self.max_distance_,
                 max_iter=self.max_icp_iter,
-                tol=_TOL * self.max_distance,
+                tol=_TOL * self.max_distance_,
             )
             rotation, translation = result.rotations, result.translations
         return (rotation[0], translation[0]), float(result.scales[0])
@@ -716,8 +737,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         moves relative to the ego motion.
         """
         sweep, tree, normals, rng, _ = context
-        islands, n_islands = voxel_islands(a, self.island_radius, self.min_island_size)
-        islands2, n_islands2 = voxel_islands(sweep, self.island_radius, self.min_island_size)
+        islands, n_islands = voxel_islands(a, self.island_radius_, self.min_island_size)
+        islands2, n_islands2 = voxel_islands(sweep, self.island_radius_, self.min_island_size)
         starts = translation_starts(
             a,
             islands,
@@ -726,8 +747,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             islands2,
             n_islands2,
             ego,
-            max_displacement=self.max_displacement,
-            bin_size=_BIN * self.max_distance,
+            max_displacement=self.max_displacement_,
+            bin_size=_BIN * self.max_distance_,
             random_state=rng,
         )
         n_starts = starts.shape[1]
@@ -748,9 +769,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             sweep,
             tree=tree,
             normals=normals,
-            max_distance=self.max_distance,
+            max_distance=self.max_distance_,
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
-            tol=_TOL * self.max_distance,
+            tol=_TOL * self.max_distance_,
         )
         motions = (result.rotations, result.translations)
         inside = np.flatnonzero(islands >= 0)
@@ -764,8 +785,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             valid.reshape(n_islands, n_starts),
             sigma,
             (sweep, tree, normals),
-            (resting, islands[inside], 0.5 * self.island_radius),
-            max_distance=self.max_distance,
+            (resting, islands[inside], 0.5 * self.island_radius_),
+            max_distance=self.max_distance_,
         )
         rotations = np.broadcast_to(ego[0], (n_islands, 3, 3)).copy()
         translations = np.broadcast_to(ego[1], (n_islands, 3)).copy()
@@ -788,12 +809,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             sigma,
             (sweep, tree, normals),
             resting,
-            cell=0.5 * self.island_radius,
+            cell=0.5 * self.island_radius_,
             min_size=self.min_island_size,
             max_points=2 * _HYPOTHESIS_POINTS,
-            max_distance=self.max_distance,
+            max_distance=self.max_distance_,
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
-            tol=_TOL * self.max_distance,
+            tol=_TOL * self.max_distance_,
             random_state=rng,
         )
         if len(slow_rotations):
@@ -802,6 +823,13 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             translations = np.concatenate([translations, slow_translations])
             moving = np.concatenate([moving, np.ones(len(slow_rotations), dtype=bool)])
         return islands, rotations, translations, moving
+
+    def _resolve_lengths(self):
+        """The lengths in use: as given, or ``"auto"`` from the estimator's ``tau``."""
+        tau = self._length_scale()
+        for name, share in _LENGTHS_PER_TAU.items():
+            value = getattr(self, name)
+            setattr(self, f"{name}_", share * tau if value == "auto" else float(value))
 
     def _length_scale(self):
         """The estimator's ``tau``, the one length the user gives (5 stands for metres)."""
@@ -874,7 +902,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             translations = np.concatenate([translations, ego[1][None]])
             scales = np.concatenate([scales, [np.nan]])
             sigmas = np.concatenate([sigmas, [np.nan]])
-        labels = np.full(len(a), static, dtype=labels_off.dtype)
+        labels = np.full(len(a), -1 if self.ground == "drop" else static, dtype=labels_off.dtype)
         labels[off] = labels_off
         return labels, estimator, rotations, translations, scales, sigmas, static
 
@@ -912,7 +940,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sigmas = np.asarray(getattr(estimator, "sigmas_", np.full(len(rotations), np.nan)))
         if static >= 0:
             labels, (rotations, translations, scales, sigmas), static = _join_slides(
-                a, labels, (rotations, translations, scales, sigmas), static, sigma
+                a, labels, (rotations, translations, scales, sigmas), static, sigma, (sweep, tree)
             )
         return labels, estimator, rotations, translations, scales, sigmas, static
 
