@@ -58,7 +58,10 @@ __all__ = [
 ]
 
 JOBS_FOLDER = "jobs"
-RESULT_KEYS = ("labels", "rotations", "translations", "sigmas", "flow", "meta")
+RESULT_KEYS = ("labels", "rotations", "translations", "sigmas", "flow", "indices", "meta")
+# Where the flow of every sweep goes in the Argoverse 2 scene-flow challenge's layout.
+SCENE_FLOW_FOLDER = "av2_scene_flow"
+SCENE_FLOW_COLUMNS = ("flow_tx_m", "flow_ty_m", "flow_tz_m")
 # The columns every summary starts with; metrics and estimator-specific numbers follow.
 SUMMARY_COLUMNS = [
     "job",
@@ -95,6 +98,10 @@ _SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob)
 # What a job of two sweeps may add for fit: the capture times of both sweeps' points and
 # the seconds between the sweeps' reference times (SweepRegistration.fit's names).
 _TIMING = ("times", "sweep_times", "interval")
+# The known ground points of both sweeps (boolean masks), for a fit that names them.
+_GROUND = ("ground", "sweep_ground")
+# The Argoverse 2 challenge's dynamic threshold: metres of flow beyond the ego flow.
+DYNAMIC_THRESHOLD = 0.05
 
 
 def _fit_parameters(estimator):
@@ -114,6 +121,12 @@ def _fit_parameters(estimator):
 def _takes_sweep(estimator):
     names = _fit_parameters(estimator)
     return names is None or "sweep" in names  # no signature to read: let fit decide
+
+
+def _takes_ground(estimator):
+    # The map's ground masks, as the times: only to a fit that names both.
+    names = _fit_parameters(estimator)
+    return names is not None and set(_GROUND) <= names
 
 
 def _takes_times(estimator):
@@ -182,6 +195,31 @@ def _metrics(X, estimator, data):
     return scores
 
 
+def _static_motion(model):
+    """Rotation and translation of the fitted static world (the largest cluster if unnamed)."""
+    static = getattr(model, "static_cluster_", None)
+    if static is None or static < 0:
+        labels = np.asarray(model.labels_)
+        counts = np.bincount(labels[labels >= 0], minlength=len(model.rotations_))
+        static = int(np.argmax(counts)) if counts.size else 0
+    return np.asarray(model.rotations_)[static], np.asarray(model.translations_)[static]
+
+
+def sweep_flow(points, indices, flow, rotation, translation):
+    """The flow of every row of a sweep from a fit on the rows ``indices``.
+
+    Rows the fit did not see (dropped ground) and rows it left without a motion (NaN
+    flow: outliers) move with the static world, ``R p + t - p``. ``is_dynamic``: the
+    flow differs from that by at least 0.05 m, the Argoverse 2 challenge's rule.
+    """
+    ego = points @ np.asarray(rotation).T + translation - points
+    out = ego.copy()
+    fitted = np.asarray(flow)[:, :3]
+    out[indices] = np.where(np.isfinite(fitted), fitted, ego[indices])
+    dynamic = np.linalg.norm(out - ego, axis=1) >= DYNAMIC_THRESHOLD
+    return out, dynamic
+
+
 def _process(job, estimator):
     """Load and fit one job (runs on a worker); ``(name, arrays or None, row)``.
 
@@ -199,6 +237,8 @@ def _process(job, estimator):
         sweep = data.get("sweep")
         if sweep is not None:
             row["n_sweep"] = len(sweep)
+        row["pairs"] = data.get("pairs", "sweeps" if sweep is not None else "correspondences")
+        row["truth_fed"] = row["pairs"] == "truth"
         row["load_s"] = time.perf_counter() - start
         model = clone(estimator)
         params = {} if sweep is None else {"sweep": sweep}
@@ -210,6 +250,10 @@ def _process(job, estimator):
         if timed:
             params.update({key: data[key] for key in _TIMING})
         row["capture_times"] = timed
+        grounded = all(data.get(key) is not None for key in _GROUND) and _takes_ground(model)
+        if grounded:
+            params.update({key: data[key] for key in _GROUND})
+        row["ground_masks"] = grounded
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -226,18 +270,28 @@ def _process(job, estimator):
             warnings=" | ".join(sorted({str(w.message) for w in caught}))[:500],
         )
         row.update(_metrics(X, model, data))
+        indices = data.get("indices")
+        indices = np.arange(len(X)) if indices is None else np.asarray(indices, dtype=np.int64)
+        arrays = {
+            "labels": model.labels_.astype(np.int64),
+            "rotations": np.asarray(model.rotations_, dtype=float),
+            "translations": np.asarray(model.translations_, dtype=float),
+            "sigmas": np.asarray(model.sigmas_, dtype=float),
+            "flow": np.asarray(model.flow_, dtype=float),
+            "indices": indices,
+        }
+        if moving is not None:
+            arrays["moving"] = np.asarray(moving, dtype=bool)
+        points = data.get("sweep_points")
+        if points is not None:
+            row["n_file"] = len(points)
+            flow, dynamic = sweep_flow(
+                np.asarray(points, float), indices, model.flow_, *_static_motion(model)
+            )
+            arrays["sweep_flow"], arrays["sweep_dynamic"] = flow.astype(np.float32), dynamic
     except Exception as error:  # one job's failure is its row, not the run's end
         row["error"] = f"{type(error).__name__}: {' '.join(str(error).split())}"[:1000]
         return job.name, None, row
-    arrays = {
-        "labels": model.labels_.astype(np.int64),
-        "rotations": np.asarray(model.rotations_, dtype=float),
-        "translations": np.asarray(model.translations_, dtype=float),
-        "sigmas": np.asarray(model.sigmas_, dtype=float),
-        "flow": np.asarray(model.flow_, dtype=float),
-    }
-    if moving is not None:
-        arrays["moving"] = np.asarray(moving, dtype=bool)
     return job.name, arrays, row
 
 
@@ -283,6 +337,62 @@ def _write_result(path, arrays, row, fingerprint):
     meta = json.dumps({"fingerprint": fingerprint, "row": row}, default=_json_value)
     with mmio.atomic_write(path) as handle:
         np.savez(handle, **arrays, meta=np.array(meta))
+
+
+def write_scene_flow(path, flow, is_dynamic):
+    """Write one sweep's flow as the Argoverse 2 scene-flow challenge's feather file.
+
+    Columns ``flow_tx_m``, ``flow_ty_m``, ``flow_tz_m`` (float32, metres, in the first
+    sweep's ego frame) and ``is_dynamic`` (bool), one row per point of the sweep in the
+    order of its file: the format of ``av2/evaluation/scene_flow/SUBMISSION_FORMAT.md``
+    and ``write_output_file`` in ``av2/evaluation/scene_flow/utils.py`` of
+    https://github.com/argoverse/av2-api (which store float16 and, for a submission,
+    only the rows of the evaluation mask: ``make_submission_archive.py`` selects and
+    casts them); the file is written whole or not at all.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``<folder>/<log_id>/<timestamp_ns>.feather`` (its folder is created).
+    flow : array-like of shape (n, 3)
+        The flow of every point.
+    is_dynamic : array-like of shape (n,) of bool
+        Whether each point moves beyond the static world's motion.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> import pandas as pd
+    >>> from mmreg.runner import write_scene_flow
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = Path(folder) / "log" / "100.feather"
+    ...     write_scene_flow(path, np.ones((2, 3)), np.array([True, False]))
+    ...     pd.read_feather(path).to_dict("list")  # doctest: +NORMALIZE_WHITESPACE
+    {'flow_tx_m': [1.0, 1.0], 'flow_ty_m': [1.0, 1.0], 'flow_tz_m': [1.0, 1.0],
+     'is_dynamic': [True, False]}
+    """
+    import pyarrow as pa
+    import pyarrow.feather as feather
+
+    from mmreg import io as mmio
+
+    flow = np.asarray(flow, dtype=np.float32).reshape(-1, 3)
+    columns = {name: flow[:, k] for k, name in enumerate(SCENE_FLOW_COLUMNS)}
+    columns["is_dynamic"] = np.asarray(is_dynamic, dtype=bool).reshape(len(flow))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with mmio.atomic_write(path) as handle:
+        feather.write_feather(pa.table(columns), handle, compression="uncompressed")
+
+
+def _write_sweep_flow(out, job, arrays):
+    """The challenge's file of a job of a log (``job.challenge``), from its result."""
+    relative = getattr(job, "challenge", "")
+    if relative and "sweep_flow" in arrays:
+        path = Path(out) / SCENE_FLOW_FOLDER / relative
+        write_scene_flow(path, arrays["sweep_flow"], arrays["sweep_dynamic"])
 
 
 def _json_value(value):
@@ -448,6 +558,9 @@ def run_dataset(
             todo.append(job)
         else:
             rows[job.name] = found[1] | {"resumed": True}
+            relative = getattr(job, "challenge", "")
+            if relative and not (out / SCENE_FLOW_FOLDER / relative).is_file():
+                _write_sweep_flow(out, job, found[0])
     bar = tqdm(
         total=len(jobs),
         initial=len(rows),
@@ -459,11 +572,13 @@ def run_dataset(
     with bar:
         if todo:
             with _dask_backend(scheduler, n_workers):
+                by_name = {job.name: job for job in todo}
                 tasks = (joblib.delayed(_process)(job, estimator) for job in todo)
                 parallel = joblib.Parallel(n_jobs=-1, return_as="generator_unordered")
                 for name, arrays, row in parallel(tasks):
                     if arrays is not None:
                         _write_result(_result_path(out, name), arrays, row, fingerprints[name])
+                        _write_sweep_flow(out, by_name[name], arrays)
                     rows[name] = row | {"resumed": False}
                     bar.update(1)
     frame = pd.DataFrame([rows[job.name] for job in jobs])
