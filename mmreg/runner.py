@@ -27,6 +27,7 @@ import inspect
 import json
 import logging
 import math
+import signal
 import sys
 import time
 import warnings
@@ -196,7 +197,12 @@ def _metrics(X, estimator, data):
 
 
 def _static_motion(model):
-    """Rotation and translation of the fitted static world (the largest cluster if unnamed)."""
+    """Rotation and translation of the fitted static world (the largest cluster if unnamed).
+
+    No cluster at all: the identity (every point stays where it is).
+    """
+    if len(model.rotations_) == 0:
+        return np.eye(3), np.zeros(3)
     static = getattr(model, "static_cluster_", None)
     if static is None or static < 0:
         labels = np.asarray(model.labels_)
@@ -414,19 +420,43 @@ def _dask_backend(scheduler, n_workers):
         if scheduler is None:
             # One thread per worker: the fits use numpy/scipy, which hold the GIL between
             # the vectorised calls, so processes (not threads) run jobs side by side.
-            cluster = stack.enter_context(
-                LocalCluster(
-                    n_workers=n_workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=":0",  # a free port: other clusters may run here
-                    silence_logs=logging.CRITICAL,  # a lost worker is a row, not a log
+            with _children_ignore_ctrl_c():
+                cluster = stack.enter_context(
+                    LocalCluster(
+                        n_workers=n_workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=":0",  # a free port: other clusters may run here
+                        silence_logs=logging.CRITICAL,  # a lost worker is a row, not a log
+                    )
                 )
-            )
             scheduler = cluster
         stack.enter_context(Client(scheduler))
         stack.enter_context(joblib.parallel_config(backend="dask"))
         yield
+
+
+@contextlib.contextmanager
+def _children_ignore_ctrl_c():
+    """Start processes that ignore SIGINT: Ctrl-C is this process's to handle.
+
+    A terminal sends Ctrl-C's SIGINT to the whole foreground process group, the Dask
+    worker processes included: each printed a traceback, and the workers killed in their
+    start left semaphores the resource tracker warned of. A process started while
+    SIGINT is ignored keeps ignoring it (the disposition survives fork and exec, and
+    Python leaves an inherited SIG_IGN alone), so the workers leave the interruption to
+    this process, which closes the cluster (and with it the workers). A Ctrl-C during
+    the cluster's start (a second or two) is lost.
+    """
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are not ours to handle
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _write_table(frame, out):
