@@ -38,8 +38,10 @@ import numpy as np
 from mmreg._dataset_jobs import (
     Argoverse2PairJob,
     Argoverse2SweepPairJob,
+    BrokenLogJob,
     CorrespondenceFileJob,
     FramePairJob,
+    KittiSweepPairJob,
     SweepPairJob,
     check_jobs,
     dataset_jobs,
@@ -48,14 +50,18 @@ from mmreg._dataset_jobs import (
 __all__ = [
     "Argoverse2PairJob",
     "Argoverse2SweepPairJob",
+    "BrokenLogJob",
     "CorrespondenceFileJob",
     "FramePairJob",
+    "KittiSweepPairJob",
     "SweepPairJob",
     "dataset_jobs",
     "default_estimator",
     "default_sweep_estimator",
     "read_job_result",
     "run_dataset",
+    "sweep_flow",
+    "write_scene_flow",
 ]
 
 JOBS_FOLDER = "jobs"
@@ -95,7 +101,7 @@ def default_sweep_estimator():
 
 
 # Jobs whose load() gives a second sweep to fit on (fit(X, sweep=...)).
-_SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob)
+_SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob, KittiSweepPairJob)
 # What a job of two sweeps may add for fit: the capture times of both sweeps' points and
 # the seconds between the sweeps' reference times (SweepRegistration.fit's names).
 _TIMING = ("times", "sweep_times", "interval")
