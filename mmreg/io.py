@@ -26,6 +26,12 @@ point clouds
     ``binary_compressed``; ``x``, ``y``, ``z`` and packed ``rgb``), read and written by
     mmreg itself (the files agree with Open3D's); ``.xyz`` (``x y z`` per line) as text;
     ``.npy`` / ``.csv`` / ``.txt`` ``(n, 3)`` arrays for reading.
+LiDAR sweeps (reading; see :mod:`mmreg._lidar_files`)
+    KITTI velodyne ``.bin`` (float32 ``x y z reflectance``), nuScenes ``.pcd.bin``
+    (float32 ``x y z intensity ring``), Argoverse 2 ``.feather`` (``x y z``, and
+    ``offset_ns``: the capture times). Invalid returns (NaN or all-zero rows) are kept in
+    place; ROS bags hold many frames and are read with
+    :func:`mmreg.datasets.open_sequence`.
 
 Text tables
 -----------
@@ -71,6 +77,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mmreg import _lidar_files
+
 __all__ = [
     "atomic_write",
     "read_correspondences",
@@ -86,8 +94,19 @@ __all__ = [
 
 _CLOUD_EXTENSIONS = (".ply", ".pcd", ".xyz")
 _TEXT_EXTENSIONS = (".csv", ".txt")
-_CORRESPONDENCE_EXTENSIONS = (".npy", ".npz", *_TEXT_EXTENSIONS, *_CLOUD_EXTENSIONS)
-_POINT_EXTENSIONS = (".npy", *_TEXT_EXTENSIONS, *_CLOUD_EXTENSIONS)
+_CORRESPONDENCE_EXTENSIONS = (
+    ".npy",
+    ".npz",
+    *_TEXT_EXTENSIONS,
+    *_CLOUD_EXTENSIONS,
+    ".bin",
+    ".pcd.bin",
+    ".feather",
+)
+# LiDAR sweep files (".pcd.bin" is told from KITTI's ".bin" by its whole name).
+_LIDAR_EXTENSIONS = (".bin", ".pcd.bin", ".feather")
+_POINT_EXTENSIONS = (".npy", *_TEXT_EXTENSIONS, *_CLOUD_EXTENSIONS, *_LIDAR_EXTENSIONS)
+_ARRAY_EXTENSIONS = (".npy", *_TEXT_EXTENSIONS)
 _CSV_HEADER = ("ax", "ay", "az", "bx", "by", "bz")
 
 
@@ -865,17 +884,47 @@ def _read_cloud_file(path, *, colors=False):
     return points, (rgb if colors else None)
 
 
-def _read_points(path, name):
-    """An (n, 3) finite array from a point cloud or a ``.npy``/``.csv``/``.txt`` file."""
-    path = _check_readable(path)
+def _check_lidar_points(points, source, name):
+    """Like :func:`_check_points` for (n, 3) LiDAR returns, but NaN / infinite rows are kept.
+
+    A sensor writes its invalid returns as NaN (or zero) rows; the estimators count and
+    drop them, and the rows keep their order (per-point times, flow files).
+    """
+    points = _as_numeric(points, source, name)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 1:
+        raise ValueError(f"{source}: {name} must be an array of shape (n, 3); got {points.shape}.")
+    return np.ascontiguousarray(points)
+
+
+def _read_point_file(path, name, *, colors=False):
+    """``(points, rgb or None, times or None)`` of any point file (checked readable).
+
+    Clouds and arrays must be finite; LiDAR sweep files keep their invalid rows.
+    """
     suffix = _extension(path, _POINT_EXTENSIONS, name)
+    kind = _lidar_files.lidar_kind(path)
+    if kind is not None:
+        points, times, _ = _lidar_files.read_lidar_file(path, kind)
+        return _check_lidar_points(points, path, name), None, times
+    rgb = None
     if suffix in _CLOUD_EXTENSIONS:
-        points, _ = _read_cloud_file(path)
+        points, rgb = _read_cloud_file(path, colors=colors)
     elif suffix == ".npy":
         points = _load_npy(path)
     else:
         points = _load_text_table(path)
-    return _check_points(points, path, 3, name)
+    return _check_points(points, path, 3, name), rgb, None
+
+
+def _read_points(path, name):
+    """An (n, 3) array from any point file (a point cloud, an array, a LiDAR sweep)."""
+    return _read_point_file(_check_readable(path), name)[0]
+
+
+def _array_columns(path, suffix):
+    """The number of columns of a ``.npy`` / ``.csv`` / ``.txt`` array (None if not 2-D)."""
+    array = _load_npy(path) if suffix == ".npy" else _load_text_table(path)
+    return array.shape[1] if array.ndim == 2 else None
 
 
 def read_correspondences(path, *, target=None, flow=None):
@@ -892,15 +941,15 @@ def read_correspondences(path, *, target=None, flow=None):
         - ``.npz``: key ``X`` (n, 6), or keys ``a`` and ``b`` (n, 3) each;
         - ``.csv`` / ``.txt``: 6 numeric columns ``ax ay az bx by bz``, with or without a
           header row, delimited by commas, spaces or tabs; ``#`` starts a comment line;
-        - ``.ply`` / ``.pcd`` / ``.xyz``: the a-points as a point cloud, which needs exactly
-          one of ``target`` and ``flow``.
+        - the a-points, which need exactly one of ``target`` and ``flow``: a point cloud
+          (``.ply`` / ``.pcd`` / ``.xyz``), a LiDAR sweep (``.bin``, ``.pcd.bin``,
+          ``.feather``) or an (n, 3) ``.npy`` / ``.csv`` / ``.txt`` array.
     target : str or path-like, optional
-        With a point-cloud ``path``: a second file with the b-points, index-aligned with
-        the a-points (row ``i`` corresponds to point ``i``): a point cloud, or an (n, 3)
-        ``.npy`` / ``.csv`` / ``.txt`` array.
+        With a-points in ``path``: a second file with the b-points, index-aligned with
+        the a-points (row ``i`` corresponds to point ``i``): any point file.
     flow : str or path-like, optional
-        With a point-cloud ``path``: an (n, 3) per-point flow (``.npy`` / ``.csv`` /
-        ``.txt``, or a point cloud whose coordinates are the flow vectors); ``b = a + flow``.
+        With a-points in ``path``: an (n, 3) per-point flow (``.npy`` / ``.csv`` /
+        ``.txt``, or a point file whose coordinates are the flow vectors); ``b = a + flow``.
 
     Returns
     -------
@@ -937,15 +986,24 @@ def read_correspondences(path, *, target=None, flow=None):
     """
     path = _check_readable(path)
     suffix = _extension(path, _CORRESPONDENCE_EXTENSIONS, "correspondences")
-    if suffix in _CLOUD_EXTENSIONS:
+    points_only = suffix in _CLOUD_EXTENSIONS or _lidar_files.lidar_kind(path) is not None
+    if not points_only and suffix in _ARRAY_EXTENSIONS and (target, flow) != (None, None):
+        # An (n, 3) array is a-points (with target= or flow=), an (n, 6) one both.
+        columns = _array_columns(path, suffix)
+        if columns not in (3, 6):
+            raise ValueError(
+                f"{path}: target= and flow= need the a-points as an (n, 3) array; this one "
+                f"has {'no 2-D shape' if columns is None else f'{columns} columns'}."
+            )
+        points_only = columns == 3
+    if points_only:
         if (target is None) == (flow is None):
             raise ValueError(
                 f"{path}: a point cloud holds only the a-points; pass exactly one of "
                 "target= (a file with the b-points) or flow= (a file with the per-point "
                 f"flow, b = a + flow); got {'both' if target is not None else 'neither'}."
             )
-        points, _ = _read_cloud_file(path)
-        a = _check_points(points, path, 3, "the a-points")
+        a = _read_point_file(path, "the a-points")[0]
         other_path = target if target is not None else flow
         other = _read_points(other_path, "the b-points" if target is not None else "the flow")
         if len(other) != len(a):
@@ -957,8 +1015,9 @@ def read_correspondences(path, *, target=None, flow=None):
         return _check_correspondence_array(np.hstack([a, b]), path)
     if target is not None or flow is not None:
         raise ValueError(
-            f"{path}: target= and flow= only apply when path is a point cloud "
-            f"({', '.join(_CLOUD_EXTENSIONS)}); a {suffix} file already holds both points."
+            f"{path}: target= and flow= only apply when path holds only the a-points (a "
+            "point cloud, a LiDAR sweep or an (n, 3) array); this file holds both a and b "
+            "(6 columns)."
         )
     if suffix == ".npy":
         X = _load_npy(path)
@@ -1423,31 +1482,44 @@ def read_motions(path):
 
 
 # --------------------------------------------------------------------------- point clouds
-def read_point_cloud(path, *, colors=False):
-    """Read the points (and colours) of a point cloud.
+def read_point_cloud(path, *, colors=False, times=False):
+    """Read the points (and colours, capture times) of a point cloud or LiDAR sweep.
 
     Parameters
     ----------
     path : str or path-like
-        ``.ply`` or ``.pcd`` (read with Open3D), ``.xyz`` (``x y z`` per line), or an
-        (n, 3) ``.npy`` / ``.csv`` / ``.txt`` array.
+        ``.ply`` or ``.pcd``, ``.xyz`` (``x y z`` per line), an (n, 3) ``.npy`` /
+        ``.csv`` / ``.txt`` array, or a LiDAR sweep: KITTI velodyne ``.bin`` (float32
+        ``x y z reflectance``, 16 bytes a point), nuScenes ``.pcd.bin`` (float32 ``x y z
+        intensity ring``, 20 bytes) or Argoverse 2 ``.feather`` (columns ``x y z``, and
+        ``offset_ns``).
     colors : bool, default=False
         Also return the colours.
+    times : bool, default=False
+        Also return the per-point capture times, in seconds after the sweep's timestamp:
+        an Argoverse 2 ``.feather``'s ``offset_ns * 1e-9``; ``None`` for every other
+        file.
 
     Returns
     -------
     points : ndarray of shape (n, 3)
+        A LiDAR sweep's invalid returns (NaN or all-zero rows) are kept in place; every
+        other format must be finite.
     colors : ndarray of shape (n, 3) or None
         Only when ``colors=True``: RGB in ``[0, 1]``, or ``None`` when the file holds no
-        colours (always for ``.xyz`` and array files).
+        colours (always for ``.xyz``, array and LiDAR files).
+    times : ndarray of shape (n,) or None
+        Only when ``times=True``, after ``colors``.
 
     Raises
     ------
     FileNotFoundError
         If the file is missing.
     ValueError
-        If it is unreadable, corrupt, empty, holds NaN or infinity, or the extension is
-        unknown.
+        If it is unreadable, corrupt, empty, not a whole number of points (``.bin``,
+        ``.pcd.bin``), lacks a column (``.feather``), holds NaN or infinity (except a
+        LiDAR sweep), is a ROS bag (many frames: see
+        :func:`mmreg.datasets.open_sequence`), or the extension is unknown.
 
     Examples
     --------
@@ -1463,22 +1535,17 @@ def read_point_cloud(path, *, colors=False):
     (True, [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     """
     path = _check_readable(path)
-    suffix = _extension(path, _POINT_EXTENSIONS, "a point cloud")
-    rgb = None
-    if suffix in _CLOUD_EXTENSIONS:
-        points, rgb = _read_cloud_file(path, colors=colors)
-    elif suffix == ".npy":
-        points = _load_npy(path)
-    else:
-        points = _load_text_table(path)
-    points = _check_points(points, path, 3, "the points")
-    if not colors:
-        return points
+    if _lidar_files.lidar_kind(path) == "bag":
+        _lidar_files.read_lidar_file(path, "bag")  # raises: a bag holds many frames
+    points, rgb, capture = _read_point_file(path, "the points", colors=colors)
+    if capture is not None and len(capture) != len(points):  # pragma: no cover - one table
+        raise ValueError(f"{path}: holds {len(points)} points but {len(capture)} times.")
     if rgb is not None:
         rgb = _check_points(rgb, path, 3, "the colours")
         if len(rgb) != len(points):
             raise ValueError(f"{path}: holds {len(points)} points but {len(rgb)} colours.")
-    return points, rgb
+    out = (points,) + ((rgb,) if colors else ()) + ((capture,) if times else ())
+    return out[0] if len(out) == 1 else out
 
 
 def write_point_cloud(path, points, colors=None):

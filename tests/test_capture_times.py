@@ -250,6 +250,22 @@ def test_register_deskews_with_the_capture_times(files, pair, tmp_path):
     assert run["sweep_times"] == str(files / "sweep_times.csv")
 
 
+def test_register_takes_the_capture_times_of_two_feather_sweeps(log, files, pair, tmp_path):
+    # The log's own files: offset_ns of both, and 0.1 s between their names' timestamps.
+    lidar = log / "sensors" / "lidar"
+    command = ["register", str(lidar / f"{STAMPS[0]}.feather"), "--sweep"]
+    command += [str(lidar / f"{STAMPS[1]}.feather"), "--tau", "2", "-q"]
+    assert main([*command, "--out", str(tmp_path / "feather")]) == 0
+    run = json.loads((tmp_path / "feather" / "run.json").read_text())
+    assert run["file_times"] is True and run["interval"] == 0.1
+    # The same fit as with the times given by hand.
+    timing = ["--times", str(files / "times.npy"), "--sweep-times"]
+    timing += [str(files / "sweep_times.csv"), "--interval", "0.1"]
+    assert _register(files, tmp_path / "timed", *timing) == 0
+    np.testing.assert_array_equal(_flow(tmp_path / "feather"), _flow(tmp_path / "timed"))
+    assert _car_error(_flow(tmp_path / "feather"), pair) < SPACING
+
+
 def _write(folder, name, values):
     np.save(folder / name, np.asarray(values))
     return str(folder / name)

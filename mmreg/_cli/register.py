@@ -24,6 +24,16 @@ from mmreg._cli._common import (
     summarize,
     write_result_dir,
 )
+from mmreg._cli._lidar_input import (
+    check_points_for,
+    check_sequence_options,
+    check_time_range,
+    file_timing,
+    holds_points_only,
+    interval_between,
+    is_sequence,
+    read_frames,
+)
 
 NAME = "register"
 HELP = "find the moving objects, their motions and the outliers in correspondences"
@@ -34,9 +44,18 @@ point clouds, with MultiModelRegistration, and write the result into a directory
 INPUT is one of
   - an (n, 6) array [a | b] in .npy, .npz, .csv or .txt (one correspondence per row:
     a_x a_y a_z b_x b_y b_z);
-  - a point cloud of the a-points (.ply, .pcd, .xyz) with --target (the b-points, one per
-    a-point in the same order: a cloud or an (n, 3) array) or --flow (an (n, 3) .npy of
-    scene flow, b = a + flow).
+  - the a-points with --target (the b-points, one per a-point in the same order), --flow
+    (an (n, 3) scene flow, b = a + flow) or --sweep (below): a point cloud (.ply, .pcd,
+    .xyz), an (n, 3) array (.npy, .csv, .txt), or a LiDAR sweep: KITTI velodyne .bin
+    (float32 x y z reflectance), nuScenes .pcd.bin (float32 x y z intensity ring),
+    Argoverse 2 .feather (x y z, and offset_ns: the capture times);
+  - a sequence: a ROS 1 .bag, a ROS 2 bag (its folder, .db3 or .mcap) with a
+    sensor_msgs/PointCloud2 topic (--topic, needed when it holds several; needs
+    pip install "mmreg[ros]"), a KITTI sequence folder (velodyne/*.bin), an Argoverse 2 log
+    (sensors/lidar/*.feather) or a folder of frame files (in name order): --frame K
+    (default 0) registers frame K (the a-points) against frame K+1 (the second sweep).
+--target, --flow and --sweep take every point format above too. Invalid LiDAR returns
+(NaN or all-zero rows) are read as they are.
 
 --sweep S names the second sweep as its own points (any size, any order). With
 correspondences (an array, or a cloud with --target or --flow) the default variant
@@ -51,7 +70,11 @@ heads see a car about 50 ms apart: two copies of it in one sweep). --times T giv
 capture time of every point of INPUT (every row of correspondences), --sweep-times TS
 that of every point of S, each in seconds after its own sweep's reference time (the time
 its static world is compensated to; Argoverse 2: offset_ns * 1e-9), and --interval the
-seconds between the two reference times (about 0.1 at 10 Hz). The three go together; T
+seconds between the two reference times (about 0.1 at 10 Hz). Two Argoverse 2 .feather
+sweeps, and the frames of a sequence whose points carry capture times (a PointCloud2
+field t, time, timestamp or offset_time; AV2's offset_ns), hand their times themselves,
+with the interval from their timestamps (the .feather names, the messages' stamps) or
+--interval. Else the three go together; T
 and TS are an (n,) .npy or one number per line (.csv/.txt, an optional header), one per
 point in the points' order, finite, and within 10 times --interval of zero (seconds, not
 nanoseconds or absolute timestamps). With them the moving clusters are deskewed inside
@@ -97,10 +120,11 @@ examples:
   mmreg register sweep0.ply --flow flow.npy --sweep sweep1.ply --tau 5
   mmreg register sweep0.ply --sweep sweep1.ply --times t0.npy --sweep-times t1.npy \
       --interval 0.1 --tau 5
+  mmreg register 000000.bin --sweep 000001.bin --tau 5
+  mmreg register LOG/sensors/lidar/T0.feather --sweep LOG/sensors/lidar/T1.feather --tau 5
+  mmreg register drive.bag --topic /velodyne_points --frame 10 --tau 5
+  mmreg register dataset/sequences/08 --frame 100 --tau 5
 """
-# Capture times beyond this many --interval from zero are not seconds after the sweep's
-# reference time (nanoseconds, or absolute timestamps): a sweep lasts about one interval.
-MAX_TIMES_PER_INTERVAL = 10.0
 
 
 def _positive_float(text):
@@ -170,23 +194,41 @@ def _count(text):
     return value
 
 
-CLOUD_EXTENSIONS = (".ply", ".pcd", ".xyz")
 VIEWS = ("auto", "street", "3d", "top", "bev", "camera")
 
 
 def add_arguments(parser):
-    parser.add_argument("input", metavar="INPUT", help="correspondences, or the a-point cloud")
+    parser.add_argument(
+        "input",
+        metavar="INPUT",
+        help="correspondences, the a-points, or a sequence (a ROS bag or a folder)",
+    )
     source = parser.add_mutually_exclusive_group()
     source.add_argument(
-        "--target", metavar="B", help="b-points, one per a-point (.ply/.pcd/.xyz or (n, 3) .npy)"
+        "--target", metavar="B", help="b-points, one per a-point (any point file, see above)"
     )
     source.add_argument("--flow", metavar="F.npy", help="scene flow, (n, 3): b = a + flow")
     parser.add_argument(
         "--sweep",
         metavar="S",
-        help="the second sweep as its own points (.ply/.pcd/.xyz or (m, 3) .npy; any size, "
-        "any order): refines the motions on it, or, with a cloud INPUT alone, registers the "
-        "two raw sweeps",
+        help="the second sweep as its own points (any point file, any size, any order): "
+        "refines the motions on it, or, with points alone as INPUT, registers the two raw "
+        "sweeps",
+    )
+    sequence = parser.add_argument_group(
+        "sequences", "INPUT a ROS bag, a KITTI sequence, an Argoverse 2 log or a folder of frames"
+    )
+    sequence.add_argument(
+        "--frame",
+        type=_count,
+        default=None,
+        metavar="K",
+        help="register frame K against frame K+1 (default 0)",
+    )
+    sequence.add_argument(
+        "--topic",
+        default=None,
+        help="the bag's sensor_msgs/PointCloud2 topic (needed when it holds several)",
     )
     timing = parser.add_argument_group(
         "capture times", "with --sweep, all three together (see above): deskew moving objects"
@@ -292,32 +334,62 @@ def add_arguments(parser):
     )
 
 
-def read_input(args):
-    """The (n, 6) correspondences of INPUT (with --target or --flow)."""
+def _check_size(points, args):
+    if len(points) < args.min_cluster_size:
+        raise CLIError(
+            f"{args.input}: {len(points)} points, fewer than --min-cluster-size "
+            f"{args.min_cluster_size}: no cluster is possible"
+        )
+    return points
+
+
+def _read_sequence_input(args, other):
+    """Frame K's points (with --target/--flow: its correspondences); frame K+1 becomes the
+    second sweep, and the frames' capture times and stamps the capture-time arguments."""
+    import numpy as np
+
     from mmreg import io as mmio
 
-    cloud = Path(args.input).suffix.lower() in CLOUD_EXTENSIONS
-    other = "--target" if args.target is not None else "--flow" if args.flow is not None else None
-    sweep = getattr(args, "sweep", None)
-    if cloud and other is None and sweep is not None:
-        with reading(args.input):
-            a = mmio.read_point_cloud(args.input)
-        if len(a) < args.min_cluster_size:
-            raise CLIError(
-                f"{args.input}: {len(a)} points, fewer than --min-cluster-size "
-                f"{args.min_cluster_size}: no cluster is possible"
-            )
+    sequence, first, second = read_frames(args)
+    args.sweep_points = second.points
+    args.input_times, args.sweep_file_times = first.times, second.times
+    if args.interval is None:
+        args.sweep_interval = interval_between(first.timestamp, second.timestamp, args.input)
+    args.frames = {"frame": first.index, "topic": getattr(sequence, "topic", None)}
+    args.frames["sources"] = [first.source, second.source]
+    a = _check_size(first.points, args)
+    if other is None:
         return a
-    if cloud and other is None and Path(args.input).exists():
+    path = args.target if args.target is not None else args.flow
+    with reading(path):
+        values = mmio._read_points(path, "the b-points" if args.target else "the flow")
+    if len(values) != len(a):
+        raise CLIError(f"{path}: {len(values):,} rows for the {len(a):,} points of {first.source}")
+    X = np.hstack([a, values if args.target is not None else a + values])
+    return check_correspondences(X, path)
+
+
+def read_input(args):
+    """The (n, 6) correspondences of INPUT (with --target or --flow), or its (n, 3) points."""
+    from mmreg import io as mmio
+
+    other = "--target" if args.target is not None else "--flow" if args.flow is not None else None
+    check_sequence_options(args)
+    if is_sequence(args.input):
+        return _read_sequence_input(args, other)
+    points = holds_points_only(args.input)
+    sweep = getattr(args, "sweep", None)
+    if points and other is None and sweep is not None:
+        with reading(args.input):
+            a, args.input_times = mmio.read_point_cloud(args.input, times=True)
+        return _check_size(a, args)
+    if points and other is None and Path(args.input).exists():
         raise CLIError(
-            f"{args.input}: a point cloud holds only the a-points; give the b-points with "
-            "--target B or the scene flow with --flow F.npy"
+            f"{args.input}: holds only the a-points; give the b-points with --target B, the "
+            "scene flow with --flow F.npy or the second sweep with --sweep S"
         )
-    if not cloud and other is not None:
-        raise CLIError(
-            f"{args.input}: {other} applies to a point cloud (.ply, .pcd, .xyz) of a-points; "
-            "this file already holds both a and b"
-        )
+    if not points and other is not None and Path(args.input).is_file():
+        check_points_for(args.input, other)
     with reading(args.input, args.target, args.flow):
         try:
             X = mmio.read_correspondences(args.input, target=args.target, flow=args.flow)
@@ -392,27 +464,59 @@ def make_init(args, n):
 
 
 def read_sweep(args):
-    """The second sweep's points (--sweep), or None."""
+    """The second sweep's points (--sweep, or a sequence's next frame), or None.
+
+    A file's capture times (an Argoverse 2 .feather's) and timestamp (its name) are kept
+    in ``args`` for :func:`read_capture_times`.
+    """
+    from mmreg import _lidar_files
     from mmreg import io as mmio
 
+    if getattr(args, "sweep_points", None) is not None:  # a sequence's frame K+1
+        return args.sweep_points
     sweep = getattr(args, "sweep", None)
     if sweep is None:
         return None
     if args.paper:
         raise CLIError("--sweep refines the default variant's motions; drop --paper")
     with reading(sweep):
-        return mmio.read_point_cloud(sweep)
+        points, args.sweep_file_times = mmio.read_point_cloud(sweep, times=True)
+    # Two Argoverse 2 sweeps: the seconds between them from their names, in integer ns.
+    first, second = (_lidar_files.av2_timestamp_ns(p) for p in (args.input, sweep))
+    if first is not None and second is not None and getattr(args, "interval", None) is None:
+        if second <= first:
+            raise CLIError(
+                f"{sweep}: its timestamp ({second} ns) is not after that of {args.input} "
+                f"({first} ns); give --interval"
+            )
+        args.sweep_interval = (second - first) * 1e-9
+    return points
 
 
 _TIME_OPTIONS = (("times", "--times"), ("sweep_times", "--sweep-times"), ("interval", "--interval"))
 
 
+def _files_carry_times(args):
+    """Whether INPUT and its second sweep may hold capture times themselves (read later)."""
+    from mmreg import _lidar_files
+
+    if is_sequence(args.input):
+        return True
+    paths = (args.input, getattr(args, "sweep", None))
+    return all(p is not None and _lidar_files.lidar_kind(p) == "feather" for p in paths)
+
+
 def check_time_options(args):
-    """The capture-time options come all three, and with --sweep; a CLIError otherwise."""
+    """The capture-time options come all three, and with --sweep; a CLIError otherwise.
+
+    --interval alone is the interval of sweeps that hold their own capture times.
+    """
     given = [flag for name, flag in _TIME_OPTIONS if getattr(args, name, None) is not None]
     if not given:
         return
-    if getattr(args, "sweep", None) is None:
+    if given == ["--interval"] and _files_carry_times(args):
+        return
+    if getattr(args, "sweep", None) is None and not is_sequence(args.input):
         raise CLIError(
             f"{', '.join(given)}: capture times deskew the moving objects in the ICP on the "
             "second sweep; give it with --sweep"
@@ -426,23 +530,13 @@ def check_time_options(args):
 
 
 def _read_times(path, n, what, interval):
-    import numpy as np
-
     from mmreg import io as mmio
 
     with reading(path):
         times = mmio.read_times(path)
     if len(times) != n:
         raise CLIError(f"{path}: {len(times):,} capture times for the {n:,} points of {what}")
-    largest = float(np.max(np.abs(times)))
-    if largest > MAX_TIMES_PER_INTERVAL * interval:
-        raise CLIError(
-            f"{path}: capture times up to {largest:g} s from the reference time, more than "
-            f"{MAX_TIMES_PER_INTERVAL:g} times --interval {interval:g} s; they must be "
-            "seconds after the sweep's reference time (not nanoseconds, not absolute "
-            "timestamps)"
-        )
-    return times
+    return check_time_range(times, interval, path)
 
 
 def read_capture_times(args, n, m):
@@ -452,10 +546,27 @@ def read_capture_times(args, n, m):
     """
     check_time_options(args)
     if getattr(args, "times", None) is None:
-        return {}
+        interval = getattr(args, "interval", None) or getattr(args, "sweep_interval", None)
+        where = getattr(args, "sweep", None) or args.input
+        timing = file_timing(
+            getattr(args, "input_times", None),
+            getattr(args, "sweep_file_times", None),
+            interval,
+            where,
+        )
+        if not timing and getattr(args, "interval", None) is not None:
+            raise CLIError(
+                f"--interval: {args.input} and its second sweep hold no capture times; give "
+                "them with --times and --sweep-times"
+            )
+        if timing:
+            args.interval = timing["interval"]  # for run.json
+            args.file_times = True
+        return timing
+    second = getattr(args, "sweep", None) or f"frame {getattr(args, 'frame', None) or 0} + 1"
     return {
         "times": _read_times(args.times, n, args.input, args.interval),
-        "sweep_times": _read_times(args.sweep_times, m, args.sweep, args.interval),
+        "sweep_times": _read_times(args.sweep_times, m, second, args.interval),
         "interval": args.interval,
     }
 
@@ -564,6 +675,8 @@ def register(
             "times": getattr(args, "times", None),
             "sweep_times": getattr(args, "sweep_times", None),
             "interval": getattr(args, "interval", None),
+            # The capture times came with the points (offset_ns, a PointCloud2 field).
+            "file_times": getattr(args, "file_times", False),
             "init": init_used,
             "initial_clusters": n_initial,
             "estimator": _params(estimator) | {"init": init_used},
@@ -615,8 +728,13 @@ def default_out(args):
     paths = [args.input, getattr(args, "target", None), getattr(args, "flow", None)]
     paths += [getattr(args, name, None) for name in ("sweep", "times", "sweep_times")]
     key = "\0".join(str(Path(p).resolve()) for p in paths if p is not None)
+    stem = Path(args.input).stem
+    if is_sequence(args.input):  # one result per frame (and topic)
+        frame = getattr(args, "frame", None) or 0
+        key += f"\0{frame}\0{getattr(args, 'topic', None)}"
+        stem += f"-frame{frame}"
     digest = hashlib.sha256(key.encode("utf-8", "surrogateescape")).hexdigest()[:8]
-    return f"{Path(args.input).stem}-mmreg-{digest}"
+    return f"{stem}-mmreg-{digest}"
 
 
 def run(args):
@@ -624,6 +742,7 @@ def run(args):
         args.out = default_out(args)
     check_out(args.out, overwrite=args.overwrite)  # before any work
     check_time_options(args)
+    check_sequence_options(args)
     if args.paper and getattr(args, "voxel_size", None) not in (None, "auto"):
         raise CLIError("--voxel-size samples the default variant's fit; drop --paper")
     with Steps(5, quiet=args.quiet, verbose=args.verbose) as steps:
@@ -636,6 +755,8 @@ def run(args):
                     "use --init euclidean or dbscan"
                 )
         record = input_record(X, args.input, args.target, args.flow)
+        if getattr(args, "frames", None) is not None:
+            record |= args.frames
         estimator, summary, elapsed, _ = register(
             X, init, args, input_name=args.input, steps=steps, extra_run=record
         )
@@ -643,7 +764,7 @@ def run(args):
         moving = summary["moving"].map({True: "yes", False: "no"})
         table = summary.assign(moving=moving.where(~summary["background"], "background"))
         print(
-            f"{len(X):,} {'points' if args.sweep is not None else 'correspondences'}: "
+            f"{len(X):,} {'points' if X.shape[1] == 3 else 'correspondences'}: "
             f"{plural(estimator.n_clusters_, 'cluster')}, "
             f"{plural(int(estimator.outlier_mask_.sum()), 'outlier')}, "
             f"{plural(estimator.n_iter_, 'iteration')}, "

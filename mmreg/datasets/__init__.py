@@ -19,6 +19,14 @@ from mmreg.datasets._meshes import MESH_NAMES, load_mesh_points
 from mmreg.datasets._pfm import read_pfm, write_pfm
 from mmreg.datasets._sam import simulate_sam_masks
 from mmreg.datasets._scene import SHAPES, make_scene
+from mmreg.datasets._sequences import (
+    Argoverse2Sweeps,
+    BagSequence,
+    Frame,
+    FrameFolder,
+    KittiSequence,
+    open_sequence,
+)
 from mmreg.datasets._street import SURFACE_KINDS, make_street
 from mmreg.datasets._wrong_matches import add_wrong_correspondences
 from mmreg.io import read_correspondences as load_correspondences
@@ -26,6 +34,11 @@ from mmreg.io import read_correspondences as load_correspondences
 __all__ = [
     "ARGOVERSE2_CATEGORIES",
     "Argoverse2Log",
+    "Argoverse2Sweeps",
+    "BagSequence",
+    "Frame",
+    "FrameFolder",
+    "KittiSequence",
     "MESH_NAMES",
     "PRIMITIVES",
     "SHAPES",
@@ -40,6 +53,7 @@ __all__ = [
     "make_flying_things",
     "make_scene",
     "make_street",
+    "open_sequence",
     "read_pfm",
     "read_scene_flow",
     "simulate_sam_masks",

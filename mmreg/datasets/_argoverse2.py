@@ -186,10 +186,12 @@ def _require_file(path, what):
 
 
 # --------------------------------------------------------------------------- file readers
-def _read_feather(path, columns, what, optional=()):
+def _read_feather(path, columns, what, optional=(), nulls_as_nan=()):
     """``{column: ndarray}`` of a feather file; ValueError naming it when unreadable.
 
-    ``columns`` must all be present; those of ``optional`` are read when present.
+    ``columns`` must all be present; those of ``optional`` are read when present. Missing
+    values are an error, except in the float columns of ``nulls_as_nan`` (a LiDAR's
+    invalid returns, as pandas writes NaN), where they read as NaN.
     """
     import pyarrow as pa
     import pyarrow.feather as feather
@@ -210,6 +212,8 @@ def _read_feather(path, columns, what, optional=()):
     out = {}
     for name in tuple(columns) + tuple(c for c in optional if c in table.column_names):
         column = table.column(name)
+        if column.null_count and name in nulls_as_nan and pa.types.is_floating(column.type):
+            column = column.cast(pa.float64()).fill_null(float("nan"))
         if column.null_count:
             raise ValueError(f"{path}: column {name} has {column.null_count} missing values.")
         try:
