@@ -22,7 +22,9 @@ and ``sweep_ground`` (m,): the map's ground points. ``pairs`` says what the fit 
   logs (a split): one job per consecutive sweep pair (N sweeps, N - 1 jobs), the two raw
   sweeps registered from the points alone; scored where the log has annotations; a log
   of a split that cannot be read is one failed job, the others go on;
-* a KITTI odometry or SemanticKITTI sequence (``velodyne/*.bin``): the same, scan by scan;
+* a KITTI odometry or SemanticKITTI sequence (``velodyne/*.bin``) or a ROS bag's
+  PointCloud2 topic (read by :func:`mmreg.datasets.open_sequence`): the same, frame by
+  frame, without truth;
 * a folder of frames (``*.ply``, ``*.pcd``, ``*.xyz``, or ``*.npy`` of shape (n, 3)), in
   name order: one job per consecutive pair, frame ``k + 1`` giving the b-points of frame
   ``k`` row by row (the clouds must be index-aligned), or with ``pairs="sweeps"`` two raw
@@ -58,7 +60,7 @@ __all__ = [
     "BrokenLogJob",
     "CorrespondenceFileJob",
     "FramePairJob",
-    "KittiSweepPairJob",
+    "SequenceSweepPairJob",
     "SweepPairJob",
     "dataset_jobs",
 ]
@@ -67,7 +69,7 @@ FRAME_EXTENSIONS = (".ply", ".pcd", ".xyz")
 CORRESPONDENCE_EXTENSIONS = (".npy", ".npz", ".csv", ".txt")
 PAIRS = ("auto", "sweeps", "truth", "aligned")
 GROUND = ("auto", "keep", "drop")
-LAYOUTS = ("auto", "argoverse2", "kitti", "frames", "correspondences")
+LAYOUTS = ("auto", "argoverse2", "sequence", "frames", "correspondences")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -394,53 +396,78 @@ def _ground_choice(ground, drop_ground):
     return "drop" if drop_ground else "keep"
 
 
-def _read_kitti_scan(path):
-    """(n, 3) float64 x, y, z of a KITTI ``velodyne/*.bin`` scan (float32 x, y, z, reflectance)."""
-    from mmreg.io import _check_readable
-
-    path = _check_readable(path, "KITTI LiDAR scan")
-    size = path.stat().st_size
-    if size % 16:
-        raise ValueError(
-            f"{path}: {size} bytes is not a whole number of KITTI points (4 float32 each: "
-            "x, y, z, reflectance); truncated?"
-        )
-    points = np.fromfile(path, dtype="<f4").reshape(-1, 4)[:, :3].astype(np.float64)
-    if not np.all(np.isfinite(points)):
-        raise ValueError(f"{path}: holds NaN or infinite coordinates.")
-    return points
+def _valid_rows(points):
+    """Rows of a sweep that are returns: finite and not the all-zero "no return" row."""
+    return np.all(np.isfinite(points), axis=1) & np.any(points != 0, axis=1)
 
 
 @dataclasses.dataclass(frozen=True)
-class KittiSweepPairJob:
-    """Scans ``first`` and ``second`` of a KITTI odometry / SemanticKITTI sequence, raw.
+class SequenceSweepPairJob:
+    """Frames ``index`` and ``index + 1`` of a LiDAR sequence (a KITTI sequence, a ROS bag).
 
-    ``X`` is the first scan's points (every row: KITTI has no ground map, so
-    ``ground="drop"`` fails), ``sweep`` the next scan's; no truth, no capture times.
+    Read by :func:`mmreg.datasets.open_sequence` (``topic``: a bag's PointCloud2
+    topic). ``X`` is the first frame's returns (rows that are NaN or all zero, the
+    sensor's "no return", are left out: ``indices`` are the rows used), ``sweep`` the
+    next frame's; with ``capture_times``, the frames' per-point ``times`` (a bag's
+    ``t`` / ``time`` field) and the interval between their timestamps. No ground map
+    (``ground="drop"`` fails), no truth.
     """
 
     name: str
-    first: str
-    second: str
+    path: str
+    index: int
     ground: str = "auto"
+    capture_times: bool = True
+    topic: str | None = None
 
     def load(self):
-        a, sweep = _read_kitti_scan(self.first), _read_kitti_scan(self.second)
-        where = str(Path(self.first).parent.parent)
-        return _pair_data(a, sweep, ground=self.ground, masks=None, where=where) | {
-            "pairs": "sweeps"
-        }
+        from mmreg.datasets import open_sequence
+
+        sequence = open_sequence(self.path, topic=self.topic)
+        first, second = sequence[self.index], sequence[self.index + 1]
+        valid, sweep_valid = _valid_rows(first.points), _valid_rows(second.points)
+        if not valid.any() or not sweep_valid.any():
+            empty = first if not valid.any() else second
+            raise ValueError(f"{empty.source}: holds no valid point.")
+        timed = (
+            self.capture_times
+            and first.times is not None
+            and second.times is not None
+            and first.timestamp is not None
+            and second.timestamp is not None
+        )
+        data = _pair_data(
+            first.points[valid],
+            second.points[sweep_valid],
+            ground=self.ground,
+            masks=None,
+            times=first.times[valid] if timed else None,
+            sweep_times=second.times[sweep_valid] if timed else None,
+            interval=second.timestamp - first.timestamp if timed else None,
+            where=self.path,
+        )
+        data["indices"] = np.flatnonzero(valid)[data["indices"]]
+        data["sweep_points"] = first.points
+        return data | {"pairs": "sweeps"}
 
 
-def _is_kitti_sequence(folder):
-    return (Path(folder) / "velodyne").is_dir()
+def _is_sequence(path):
+    """A KITTI sequence folder or a ROS bag (a ``.bag``, ``.db3``, ``.mcap`` or folder)."""
+    from mmreg._lidar_files import lidar_kind
+
+    path = Path(path)
+    return (path.is_dir() and (path / "velodyne").is_dir()) or lidar_kind(path) == "bag"
 
 
-def _kitti_jobs(folder, ground):
-    scans = sorted((Path(folder) / "velodyne").glob("*.bin"))
+def _sequence_jobs(path, ground, capture_times, topic):
+    from mmreg.datasets import open_sequence
+
+    sequence = open_sequence(path, topic=topic)
+    bag = sequence.kind == "bag"
+    names = [f"{k:06d}" if bag else Path(name).stem for k, name in enumerate(sequence.names)]
     return [
-        KittiSweepPairJob(f"{first.stem}", str(first), str(second), ground)
-        for first, second in zip(scans[:-1], scans[1:], strict=True)
+        SequenceSweepPairJob(names[k], str(path), k, ground, capture_times, topic)
+        for k in range(len(sequence) - 1)
     ]
 
 
@@ -452,6 +479,7 @@ def dataset_jobs(
     pairs="auto",
     capture_times=True,
     flow=None,
+    topic=None,
     drop_ground=None,
 ):
     """The jobs of the dataset at ``path`` (a folder), in a stable order.
@@ -460,13 +488,15 @@ def dataset_jobs(
     ----------
     path : str or path-like
         An Argoverse 2 log or a folder of logs (a split), a KITTI odometry or
-        SemanticKITTI sequence (``velodyne/*.bin``), a folder of frames or of
+        SemanticKITTI sequence (``velodyne/*.bin``), a ROS bag, a folder of frames or of
         correspondence files.
-    layout : {"auto", "argoverse2", "kitti", "frames", "correspondences"}, default="auto"
-        What the folder holds; ``"auto"``: an Argoverse 2 log or folder of logs if it
-        looks like one (``sensors/lidar``), a KITTI sequence if it has ``velodyne/``, else
-        frames when the files are point clouds or (n, 3) ``.npy`` arrays, else
-        correspondence files.
+    layout : {"auto", "argoverse2", "sequence", "frames", "correspondences"}, default="auto"
+        What the path holds; ``"auto"``: an Argoverse 2 log or folder of logs if it
+        looks like one (``sensors/lidar``), a sequence (read by
+        :func:`mmreg.datasets.open_sequence`) if it is a KITTI sequence (``velodyne/``)
+        or a ROS bag (``.bag``, ``.db3``, ``.mcap``, a ROS 2 bag folder), else frames
+        when the files are point clouds or (n, 3) ``.npy`` arrays, else correspondence
+        files.
     ground : {"auto", "keep", "drop"}, default="auto"
         LiDAR logs: ``"drop"`` removes the ground points before the fit (an Argoverse 2
         log's map rule; a log without a map fails), ``"keep"`` fits them as any other
@@ -491,6 +521,9 @@ def dataset_jobs(
         for one log) with ``flow_tx_m``, ``flow_ty_m``, ``flow_tz_m``, one row per point
         of the sweep as the log holds it (ZeroFlow, DeFlow); each pair is then fitted as
         ``fit([a | a + flow], sweep=next)``. Argoverse 2 only.
+    topic : str, default=None
+        A ROS bag's ``sensor_msgs/PointCloud2`` topic; needed only when the bag holds
+        several.
     drop_ground : bool, default=None
         Deprecated spelling of ``ground``: True is ``"drop"``, False ``"keep"``.
 
@@ -498,7 +531,7 @@ def dataset_jobs(
     -------
     jobs : list
         Of FramePairJob, SweepPairJob, CorrespondenceFileJob, Argoverse2PairJob,
-        Argoverse2SweepPairJob, KittiSweepPairJob or (a log of a split that cannot be
+        Argoverse2SweepPairJob, SequenceSweepPairJob or (a log of a split that cannot be
         read: one failed row) BrokenLogJob.
 
     Raises
@@ -529,6 +562,14 @@ def dataset_jobs(
     folder = Path(path)
     if not folder.exists():
         raise FileNotFoundError(f"{folder}: no such folder (the dataset).")
+    if layout == "sequence" or (layout == "auto" and flow is None and _is_sequence(folder)):
+        if pairs in ("truth", "aligned"):
+            raise ValueError(
+                f"{folder}: a KITTI sequence or a bag has no flow to fit on; pairs='sweeps'."
+            )
+        return _check_some(_sequence_jobs(folder, ground, capture_times, topic), folder)
+    if topic is not None:
+        raise ValueError(f"{folder}: topic= (--topic) applies to a ROS bag only.")
     if not folder.is_dir():
         raise ValueError(f"{folder}: not a folder; a dataset is a folder of files or logs.")
     if flow is not None:
@@ -554,10 +595,6 @@ def dataset_jobs(
             f"{folder}: not an Argoverse 2 log nor a folder of logs; a flow folder "
             "(flow=, --flow) refines the sweeps of Argoverse 2 logs."
         )
-    if layout == "kitti" or (layout == "auto" and _is_kitti_sequence(folder)):
-        if pairs in ("truth", "aligned"):
-            raise ValueError(f"{folder}: a KITTI sequence has no flow to fit on; pairs='sweeps'.")
-        return _check_some(_kitti_jobs(folder, ground), folder)
     if pairs == "truth":
         raise ValueError(
             f"{folder}: pairs='truth' fits an Argoverse 2 log's ground-truth flow; this "

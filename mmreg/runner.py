@@ -41,7 +41,7 @@ from mmreg._dataset_jobs import (
     BrokenLogJob,
     CorrespondenceFileJob,
     FramePairJob,
-    KittiSweepPairJob,
+    SequenceSweepPairJob,
     SweepPairJob,
     check_jobs,
     dataset_jobs,
@@ -53,7 +53,7 @@ __all__ = [
     "BrokenLogJob",
     "CorrespondenceFileJob",
     "FramePairJob",
-    "KittiSweepPairJob",
+    "SequenceSweepPairJob",
     "SweepPairJob",
     "dataset_jobs",
     "default_estimator",
@@ -101,7 +101,7 @@ def default_sweep_estimator():
 
 
 # Jobs whose load() gives a second sweep to fit on (fit(X, sweep=...)).
-_SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob, KittiSweepPairJob)
+_SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob, SequenceSweepPairJob)
 # What a job of two sweeps may add for fit: the capture times of both sweeps' points and
 # the seconds between the sweeps' reference times (SweepRegistration.fit's names).
 _TIMING = ("times", "sweep_times", "interval")

@@ -351,10 +351,77 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
         )
         == 1
     )
-    assert "not a whole number of KITTI points" in capsys.readouterr().err
+    assert "1 job failed" in capsys.readouterr().err
+    torn = pd.read_csv(tmp_path / "torn" / "summary.csv")
+    assert torn["status"].tolist() == ["done", "error"]
+    assert "000002.bin: 20 bytes is not a whole number of KITTI" in torn.loc[1, "error"]
     command = ["run", str(sequence), "--ground", "drop", "--scheduler", scheduler, "-q"]
     assert main([*command, "--out", str(tmp_path / "drop")]) == 1
     assert "--ground drop needs it" in capsys.readouterr().err
+
+
+def _pointcloud2(types, points, stamp_ns, times_ns):
+    """A sensor_msgs/PointCloud2 of float32 x, y, z and a uint32 per-point time ``t``."""
+    PointField = types["sensor_msgs/msg/PointField"]
+    fields = [PointField(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")]
+    fields.append(PointField(name="t", offset=12, datatype=6, count=1))  # Ouster style
+    record = np.zeros(len(points), [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", "<u4")])
+    for k, name in enumerate("xyz"):
+        record[name] = points[:, k]
+    record["t"] = times_ns
+    stamp = types["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+    return types["sensor_msgs/msg/PointCloud2"](
+        header=types["std_msgs/msg/Header"](stamp=stamp, frame_id="lidar"),
+        height=1,
+        width=len(points),
+        fields=fields,
+        is_bigendian=False,
+        point_step=record.itemsize,
+        row_step=record.itemsize * len(points),
+        data=np.frombuffer(record.tobytes(), np.uint8),
+        is_dense=False,
+    )
+
+
+def test_ros2_bag_with_a_topic(tmp_path, scheduler, capsys):
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    sequence, sizes = _write_kitti(tmp_path / "scans")
+    scans = [
+        np.fromfile(path, np.float32).reshape(-1, 4)[:, :3].copy()
+        for path in sorted((sequence / "velodyne").glob("*.bin"))
+    ]
+    scans[0][3] = np.nan  # no return: left out of the fit, its row kept in the indices
+    typestore = get_typestore(Stores.ROS2_HUMBLE)
+    msgtype = "sensor_msgs/msg/PointCloud2"
+    bag = tmp_path / "drive"
+    with Writer(bag, version=8) as writer:
+        topics = [writer.add_connection(t, msgtype, typestore=typestore) for t in ("/a", "/b")]
+        for k, points in enumerate(scans):
+            stamp = 1_700_000_000 * 10**9 + k * 100_000_000
+            times = np.zeros(len(points), np.uint32)  # every point at the stamp
+            message = typestore.serialize_cdr(
+                _pointcloud2(typestore.types, points, stamp, times), msgtype
+            )
+            for topic in topics:
+                writer.write(topic, stamp, message)
+    out = tmp_path / "out"
+    command = ["run", str(bag), "--scheduler", scheduler, "-q", "--out", str(out)]
+    assert main(command) == 2  # two PointCloud2 topics: which one?
+    assert "/a" in capsys.readouterr().err
+    assert main([*command, "--topic", "/b"]) == 0
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary["job"].tolist() == [0, 1] and summary["n"].tolist() == [399, 390]
+    arrays, _ = read_job_result(out / "jobs" / "000000.npz")
+    np.testing.assert_array_equal(arrays["indices"], np.delete(np.arange(400), 3))
+    kept = scans[0][arrays["indices"]].astype(float)
+    expected = _cli_estimator().fit(kept, sweep=scans[1].astype(float))
+    np.testing.assert_array_equal(arrays["labels"], expected.labels_)
+    still = arrays["labels"][: sizes[0][0] - 1]
+    assert len(np.unique(still)) == 1 and len(np.unique(arrays["labels"])) == 2
+    assert np.isnan(arrays["sweep_flow"][3]).all() and len(arrays["sweep_flow"]) == 400
 
 
 # --------------------------------------------------------------------------- options

@@ -1,5 +1,6 @@
 """``mmreg run``: process a whole dataset as independent jobs on Dask (resumable)."""
 
+import contextlib
 import hashlib
 import importlib.util
 import json
@@ -23,8 +24,10 @@ DATASET is one of
     annotations), or a folder of logs (a split): one job per consecutive sweep pair (N
     sweeps, N-1 jobs), scored against the truth where the log has annotations. A log
     of a split that cannot be read is a failed row; the others go on;
-  - a KITTI odometry or SemanticKITTI sequence (a folder with velodyne/*.bin): one job
-    per consecutive scan pair;
+  - a KITTI odometry or SemanticKITTI sequence (a folder with velodyne/*.bin), or a ROS
+    bag (.bag, a ROS 2 bag folder, .db3, .mcap; --topic picks its PointCloud2 topic when
+    it has several): one job per consecutive frame pair (rows that are NaN or all zero,
+    no return, are left out);
   - a folder of frames (*.ply, *.pcd, *.xyz or (n, 3) *.npy, in name order): one job per
     consecutive pair, frame k+1 giving the b-point of every row of frame k (index-aligned
     clouds), or with --pairs sweeps two raw sweeps;
@@ -88,12 +91,13 @@ examples:
   mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --flow zeroflow/val
   mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs truth
   mmreg run /data/kitti/odometry/sequences/08 --out kitti-08
+  mmreg run drive.bag --topic /velodyne_points --out drive
   mmreg run frames/ --out result --method robust --tau 1.5
   mmreg run lidar_frames/ --pairs sweeps --out result
 """
 
 METHODS = ("sweep", "robust", "paper")
-LAYOUTS = ("auto", "argoverse2", "kitti", "frames", "correspondences")
+LAYOUTS = ("auto", "argoverse2", "sequence", "frames", "correspondences")
 PAIRS = ("auto", "sweeps", "truth", "aligned")
 GROUND = ("auto", "keep", "drop")
 # What an 'mmreg run' folder holds at its top (jobs/ holds <job>.npz files).
@@ -101,7 +105,9 @@ RUN_FILES = ("run.json", "summary.parquet", "summary.csv", "jobs", "av2_scene_fl
 
 
 def add_arguments(parser):
-    parser.add_argument("dataset", metavar="DATASET", help="a dataset folder (see above)")
+    parser.add_argument(
+        "dataset", metavar="DATASET", help="a dataset folder or a ROS bag (see above)"
+    )
     parser.add_argument(
         "--out",
         metavar="DIR",
@@ -151,6 +157,12 @@ def add_arguments(parser):
         "challenge layout) on the second sweep (see above)",
     )
     parser.add_argument(
+        "--topic",
+        metavar="TOPIC",
+        default=None,
+        help="a ROS bag's PointCloud2 topic (needed only when the bag has several)",
+    )
+    parser.add_argument(
         "--ground",
         choices=GROUND,
         default="auto",
@@ -188,6 +200,7 @@ def _configuration(args):
         "layout": args.layout,
         "pairs": args.pairs,
         "ground": args.ground,
+        "topic": args.topic,
         "flow": None if args.flow is None else str(Path(args.flow).resolve()),
         "capture_times": args.capture_times,
         "method": args.method,
@@ -255,6 +268,15 @@ def _estimator(args, jobs):
     return estimator
 
 
+@contextlib.contextmanager
+def _missing_reader():
+    """A reader's missing package (rosbags for a bag) is one line naming the install."""
+    try:
+        yield
+    except ImportError as error:
+        raise CLIError(one_line(error)) from None
+
+
 def default_out(args):
     """``<DATASET's name>-mmreg-run-<8 hex digits of its full path>``: never shared."""
     path = str(Path(args.dataset).resolve())
@@ -273,7 +295,7 @@ def run(args):
     out = Path(args.out)
     configuration = _configuration(args)
     resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
-    with reading(args.dataset):
+    with reading(args.dataset), _missing_reader():
         jobs = dataset_jobs(
             args.dataset,
             layout=args.layout,
@@ -281,6 +303,7 @@ def run(args):
             pairs=args.pairs,
             capture_times=args.capture_times,
             flow=args.flow,
+            topic=args.topic,
         )
     try:
         if args.overwrite and (out / "jobs").is_dir():
