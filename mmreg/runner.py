@@ -8,17 +8,38 @@ with a summary table, one row per job (``OUT/summary.parquet`` and ``summary.csv
 
 Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas``,
 ``flow`` (the rigid flow, :attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when
-the estimator reports it) and ``meta``: a JSON string with the job's summary row and the
-fingerprint of (job, estimator) the result belongs to.
+the estimator reports it), ``indices`` and ``meta``: a JSON string with the job's summary
+row and the fingerprint of (job, estimator) the result belongs to. ``indices`` (n,) are
+the rows of the job's input the fit saw: for a LiDAR sweep pair, the rows of the first
+sweep's file (``--ground drop`` leaves the ground rows out, a bag or KITTI scan its NaN
+and all-zero rows), so ``labels[k]`` and ``flow[k]`` belong to row ``indices[k]`` of the
+sweep as the file holds it; ``arange(n)`` for frames and correspondence files. A sweep
+pair also stores ``sweep_flow`` (float32, one row per row of the file) and
+``sweep_dynamic`` (bool): the flow of every row, the rows the fit did not see (or left
+without a motion: outliers) moving with the fitted static world, and whether it moves
+0.05 m or more beyond that motion (the Argoverse 2 challenge's rule). For an Argoverse 2
+log these also go to ``OUT/av2_scene_flow/<log>/<timestamp_ns>.feather``, the scene-flow
+challenge's format (:func:`write_scene_flow`), ready for the official evaluation.
 
-A job of two raw sweeps (``dataset_jobs(..., pairs="sweeps")``) loads the first sweep
-``X`` (n, 3) and the second ``sweep`` (m, 3); it is fitted as ``fit(X, sweep=sweep)``,
-by :func:`default_sweep_estimator` unless another estimator taking ``sweep`` is given.
+A job of two sweeps (:func:`dataset_jobs`: LiDAR logs by default) loads the first sweep
+``X`` (n, 3) (or ``[a | a + flow]`` (n, 6) with a network's flow, refinement mode) and
+the second ``sweep`` (m, 3); it is fitted as ``fit(X, sweep=sweep)``, by
+:func:`default_sweep_estimator` unless another estimator taking ``sweep`` is given.
 When the job also loads the points' capture times (``times``, ``sweep_times``) and the
-``interval`` between the sweeps (Argoverse 2), they are passed too if the estimator's
-``fit`` names all three as parameters (:class:`~mmreg.SweepRegistration` deskews the
-moving objects with them); any other estimator is fitted as before. The summary's
-``capture_times`` column says whether a job's fit had them.
+``interval`` between the sweeps (Argoverse 2, bags with per-point times), they are
+passed too if the estimator's ``fit`` names all three as parameters
+(:class:`~mmreg.SweepRegistration` deskews the moving objects with them); the map's
+ground points of both sweeps (``ground``, ``sweep_ground``: boolean masks, Argoverse 2
+logs with a map, ``ground="auto"``) likewise go to a ``fit`` that names both. Any other
+estimator is fitted without them. The summary's ``capture_times`` and ``ground_masks``
+columns say whether a job's fit had them; ``pairs`` says what it was given
+(``"sweeps"``, ``"flow"``: a network's flow, ``"truth"``: the ground-truth flow, its
+scores then measure the clustering alone, also flagged by ``truth_fed``,
+``"correspondences"``).
+
+Ctrl-C: the workers of the LocalCluster started here ignore SIGINT (a terminal sends it
+to the whole process group); the KeyboardInterrupt is this process's, which closes the
+cluster on its way out.
 """
 
 import contextlib
@@ -504,8 +525,14 @@ def run_dataset(
         ``"sweep"`` (m, 3) for a job of two raw sweeps (then ``X`` may be (n, 3): the
         first sweep; see ``pairs`` of :func:`dataset_jobs`), with ``"times"`` (n,),
         ``"sweep_times"`` (m,) and ``"interval"`` (seconds) when the points' capture
-        times are known: these go to ``fit`` when it names all three as parameters. The
-        jobs are pickled to the workers, which must be able to read the files they name.
+        times are known: these go to ``fit`` when it names all three as parameters;
+        ``"ground"`` (n,) and ``"sweep_ground"`` (m,) (known ground points, to a ``fit``
+        naming both); ``"indices"`` (n,) (the rows of the input ``X`` holds; default
+        ``arange(n)``), ``"sweep_points"`` (every row of the first sweep's file: then
+        ``sweep_flow`` is stored) and ``"pairs"`` (what ``X`` is). A job with a
+        ``challenge`` attribute (``"<log>/<timestamp_ns>.feather"``) also writes its
+        sweep's flow in the Argoverse 2 challenge's format. The jobs are pickled to the
+        workers, which must be able to read the files they name.
     estimator : estimator, default=None
         A scikit-learn style estimator (``fit(X)``, ``labels_``, ``rotations_``,
         ``translations_``, ``sigmas_``, ``flow_``); None: :func:`default_estimator`, or
@@ -539,8 +566,11 @@ def run_dataset(
         ``acc3dr``, ``outliers3d`` (of the rigid flow, :func:`mmreg.metrics.
         scene_flow_metrics`), ``epe_static`` and ``epe_moving`` (the mean EPE on the
         largest object's points and on the others'). Points with a negative true label
-        are not scored. ``capture_times``: whether ``fit`` was given the points' capture
-        times.
+        are not scored. ``capture_times`` and ``ground_masks``: whether ``fit`` was given
+        the points' capture times and the map's ground masks; ``pairs``: what it was
+        fitted on (``"sweeps"``, ``"flow"``, ``"truth"``, ``"correspondences"``) and
+        ``truth_fed``: whether that was the ground-truth flow; ``n_file``: rows of the
+        first sweep's file.
 
     Examples
     --------
