@@ -178,6 +178,7 @@ def _pair_data(
     if flow is not None:
         X = np.hstack([X, X + flow[indices]])
     data = {"X": X, "sweep": sweep[keep_sweep], "indices": indices, "sweep_points": a}
+    data["ground_rule"] = "dropped" if ground == "drop" else "kept"
     if ground == "auto" and masks is not None:
         data["ground"], data["sweep_ground"] = masks[0][indices], masks[1][keep_sweep]
     if (
@@ -500,8 +501,10 @@ def dataset_jobs(
     ground : {"auto", "keep", "drop"}, default="auto"
         LiDAR logs: ``"drop"`` removes the ground points before the fit (an Argoverse 2
         log's map rule; a log without a map fails), ``"keep"`` fits them as any other
-        point, ``"auto"`` keeps them and hands the map's ground masks (``ground``,
-        ``sweep_ground``) to an estimator whose ``fit`` names them, when the log has a map.
+        point, ``"auto"`` keeps them and, when the log has a map, gives the map's ground
+        masks (``ground``, ``sweep_ground``); :func:`mmreg.runner.run_dataset` hands
+        them to an estimator whose ``fit`` names them and drops the ground rows for any
+        other (as ``"drop"``).
     pairs : {"auto", "sweeps", "truth", "aligned"}, default="auto"
         What a job fits. ``"sweeps"``: two raw sweeps or frames of any sizes and orders,
         registered from the points alone by :class:`mmreg.SweepRegistration` (the

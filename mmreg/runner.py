@@ -31,8 +31,10 @@ passed too if the estimator's ``fit`` names all three as parameters
 (:class:`~mmreg.SweepRegistration` deskews the moving objects with them); the map's
 ground points of both sweeps (``ground``, ``sweep_ground``: boolean masks, Argoverse 2
 logs with a map, ``ground="auto"``) likewise go to a ``fit`` that names both. Any other
-estimator is fitted without them. The summary's ``capture_times`` and ``ground_masks``
-columns say whether a job's fit had them; ``pairs`` says what it was given
+estimator is fitted without the times, and without the ground rows when it cannot take
+the masks (as ``ground="drop"``). The summary's ``capture_times`` column says whether a
+job's fit had the times, ``ground`` what became of the known ground (``"masks"``,
+``"dropped"``, ``"kept"``); ``pairs`` says what it was given
 (``"sweeps"``, ``"flow"``: a network's flow, ``"truth"``: the ground-truth flow, its
 scores then measure the clustering alone, also flagged by ``truth_fed``,
 ``"correspondences"``).
@@ -253,6 +255,32 @@ def sweep_flow(points, indices, flow, rotation, translation):
     return out, dynamic
 
 
+def _known_ground(data, model):
+    """The job's data for ``model`` and what became of the ground points it knows.
+
+    ``"masks"``: the map's ground masks go to a ``fit`` that names them; ``"dropped"``:
+    the ground rows were removed, by the job (``ground="drop"``) or here, for a ``fit``
+    that takes no masks (on the real Argoverse 2 pair ``av2_api_7fab2350`` the default
+    SweepRegistration found 1 of 21 moving objects with the ground kept, 5 without);
+    ``"kept"``: fitted as ordinary points (``ground="keep"``, or no map); None: a job
+    without ground (frames, correspondences).
+    """
+    rule = data.get("ground_rule")
+    if any(data.get(key) is None for key in _GROUND):
+        return data, rule
+    if _takes_ground(model):
+        return data, "masks"
+    keep, keep_sweep = ~np.asarray(data["ground"]), ~np.asarray(data["sweep_ground"])
+    out = {key: value for key, value in data.items() if key not in _GROUND}
+    for key in ("X", "indices", "times", "labels_true", "flow_true"):
+        if out.get(key) is not None:
+            out[key] = np.asarray(out[key])[keep]
+    for key in ("sweep", "sweep_times"):
+        if out.get(key) is not None:
+            out[key] = np.asarray(out[key])[keep_sweep]
+    return out, "dropped"
+
+
 def _process(job, estimator):
     """Load and fit one job (runs on a worker); ``(name, arrays or None, row)``.
 
@@ -265,6 +293,8 @@ def _process(job, estimator):
     try:
         start = time.perf_counter()
         data = job.load()
+        model = clone(estimator)
+        data, row["ground"] = _known_ground(data, model)
         X = np.asarray(data["X"], dtype=float)
         row["n"] = len(X)
         sweep = data.get("sweep")
@@ -273,7 +303,6 @@ def _process(job, estimator):
         row["pairs"] = data.get("pairs", "sweeps" if sweep is not None else "correspondences")
         row["truth_fed"] = row["pairs"] == "truth"
         row["load_s"] = time.perf_counter() - start
-        model = clone(estimator)
         params = {} if sweep is None else {"sweep": sweep}
         timed = (
             sweep is not None
@@ -283,10 +312,8 @@ def _process(job, estimator):
         if timed:
             params.update({key: data[key] for key in _TIMING})
         row["capture_times"] = timed
-        grounded = all(data.get(key) is not None for key in _GROUND) and _takes_ground(model)
-        if grounded:
+        if row["ground"] == "masks":
             params.update({key: data[key] for key in _GROUND})
-        row["ground_masks"] = grounded
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -566,8 +593,10 @@ def run_dataset(
         ``acc3dr``, ``outliers3d`` (of the rigid flow, :func:`mmreg.metrics.
         scene_flow_metrics`), ``epe_static`` and ``epe_moving`` (the mean EPE on the
         largest object's points and on the others'). Points with a negative true label
-        are not scored. ``capture_times`` and ``ground_masks``: whether ``fit`` was given
-        the points' capture times and the map's ground masks; ``pairs``: what it was
+        are not scored. ``capture_times``: whether ``fit`` was given the points' capture
+        times; ``ground``: whether the map's ground masks were handed to ``fit``
+        (``"masks"``), the ground rows dropped (``"dropped"``: ``ground="drop"``, or
+        ``"auto"`` with a ``fit`` that takes no masks) or kept (``"kept"``); ``pairs``: what it was
         fitted on (``"sweeps"``, ``"flow"``, ``"truth"``, ``"correspondences"``) and
         ``truth_fed``: whether that was the ground-truth flow; ``n_file``: rows of the
         first sweep's file.

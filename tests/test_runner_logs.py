@@ -202,15 +202,23 @@ def test_map_ground_masks_go_to_a_fit_that_names_them(tmp_path):
 
     job = dataset_jobs(log)[0]
     _, arrays, row = _process(job, Grounded(_cli_estimator().estimator, random_state=0))
-    assert row["status"] == "done" and row["ground_masks"]
+    assert row["status"] == "done" and row["ground"] == "masks"
     scene = load_argoverse2(log, 0)
     np.testing.assert_array_equal(seen["ground"], scene.ground)
     np.testing.assert_array_equal(seen["sweep_ground"], scene.sweep2_ground)
     assert seen["ground"][: SIZES[0][0]].all() and not seen["ground"][SIZES[0][0] :].any()
-    # A fit that does not name them gets none; nor do "keep" jobs.
-    _, _, plain = _process(job, _cli_estimator())
-    _, _, kept = _process(dataset_jobs(log, ground="keep")[0], Grounded(random_state=0))
-    assert not plain["ground_masks"] and not kept["ground_masks"]
+    # A fit that does not name them gets none: the map's ground rows are dropped, the
+    # same fit as --ground drop. "keep" jobs keep them and pass no mask.
+    _, plain_arrays, plain = _process(job, _cli_estimator())
+    dropped = dataset_jobs(log, ground="drop")[0]
+    _, drop_arrays, drop = _process(dropped, _cli_estimator())
+    assert plain["ground"] == drop["ground"] == "dropped" and plain["n"] == drop["n"]
+    np.testing.assert_array_equal(plain_arrays["indices"], np.flatnonzero(~scene.ground))
+    for key in ("indices", "labels", "flow", "sweep_flow"):
+        np.testing.assert_array_equal(plain_arrays[key], drop_arrays[key])
+    _, kept_arrays, kept = _process(dataset_jobs(log, ground="keep")[0], Grounded(random_state=0))
+    assert kept["ground"] == "kept" and seen["ground"] is None
+    np.testing.assert_array_equal(kept_arrays["indices"], np.arange(len(scene.a)))
 
 
 def test_split_with_broken_logs_gives_failed_rows_and_the_others_go_on(tmp_path, scheduler, capsys):
@@ -249,7 +257,9 @@ def test_truth_fed_jobs_are_marked(tmp_path, scheduler, capsys):
     scene = load_argoverse2(log, 0)
     arrays, _ = read_job_result(out / "jobs" / f"{STAMPS[0]}.npz")
     expected = MultiModelRegistration(variant="sweep", tau=5.0, max_iter=10, random_state=0)
-    np.testing.assert_array_equal(arrays["labels"], expected.fit(scene.X).labels_)
+    # The map's ground rows dropped: MultiModelRegistration.fit takes no ground masks.
+    assert summary["ground"].tolist() == ["dropped", "dropped"]
+    np.testing.assert_array_equal(arrays["labels"], expected.fit(scene.X[~scene.ground]).labels_)
     # Without annotations there is no truth to feed: a failed row per pair.
     bare = _write_log(tmp_path / "bare", annotations=False)
     command = ["run", str(bare), "--pairs", "truth", "--scheduler", scheduler, "-q"]
@@ -280,15 +290,19 @@ def test_a_networks_flow_is_refined_on_the_next_sweep(tmp_path, scheduler, capsy
         # One row per point: the file's float32 flow, as the job reads it.
         flow = pd.read_feather(flows / f"{t}.feather").iloc[:, :3].to_numpy(np.float64)
         np.testing.assert_allclose(X[:, 3:] - X[:, :3], flow, atol=1e-5)
-        X = np.hstack([scene.a, scene.a + flow])
-        expected = _cli_estimator().fit(X, sweep=scene.sweep2)
+        # The log has a map and SweepRegistration.fit takes no ground mask: the map's
+        # ground rows are dropped from both sweeps.
+        keep = ~scene.ground
+        X = np.hstack([scene.a[keep], scene.a[keep] + flow[keep]])
+        expected = _cli_estimator().fit(X, sweep=scene.sweep2[~scene.sweep2_ground])
         arrays, _ = read_job_result(out / "jobs" / f"{t}.npz")
+        np.testing.assert_array_equal(arrays["indices"], np.flatnonzero(keep))
         np.testing.assert_array_equal(arrays["labels"], expected.labels_)
         np.testing.assert_array_equal(arrays["flow"], expected.flow_)
         # The refinement puts the car where it goes: better than the 30 % short input.
-        car = scene.labels == 1
-        refined = np.linalg.norm(arrays["flow"] - scene.flow, axis=1)[car].mean()
-        given = np.linalg.norm(flow - scene.flow, axis=1)[car].mean()
+        car = scene.labels[keep] == 1
+        refined = np.linalg.norm(arrays["flow"] - scene.flow[keep], axis=1)[car].mean()
+        given = np.linalg.norm(flow[keep] - scene.flow[keep], axis=1)[car].mean()
         assert refined < given / 2
     # DIR/<timestamp_ns>.feather for one log: the same jobs.
     flat = dataset_jobs(log, flow=flows)

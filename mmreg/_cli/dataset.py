@@ -51,8 +51,9 @@ for one log) with flow_tx_m, flow_ty_m, flow_tz_m, one row per point of the swee
 log holds it; each pair is fitted as SweepRegistration.fit([a | a + flow], sweep=next).
 
 --ground says what becomes of the ground points of LiDAR logs:
-  - auto (default): kept, and the map's ground points (Argoverse 2 logs with a map/) are
-    handed to the estimator when its fit takes them ('ground', 'sweep_ground');
+  - auto (default): where the log has a map (Argoverse 2 logs with map/), the map's
+    ground points go to the estimator when its fit takes them ('ground', 'sweep_ground'),
+    else they are dropped as with drop; without a map they are kept;
   - keep: registered as ordinary points;
   - drop: removed before the fit, by the map's rule (a log without a map fails).
 
@@ -166,8 +167,9 @@ def add_arguments(parser):
         "--ground",
         choices=GROUND,
         default="auto",
-        help="LiDAR logs' ground points: 'auto' keeps them and hands the map's ground to "
-        "the estimator, 'keep' registers them as any point, 'drop' removes them (map rule)",
+        help="LiDAR logs' ground points: 'auto' hands the map's ground to an estimator "
+        "that takes it (else as drop; no map: as keep), 'keep' registers them as any "
+        "point, 'drop' removes them (map rule)",
     )
     parser.add_argument(
         "--keep-ground",
