@@ -216,10 +216,14 @@ class _PartialLog(_Log):
         return super().ground(points_ego, city_SE3_ego, threshold)
 
     def sweep_pair(self, index):
-        """Both sweeps of pair ``index`` (every row), their times, ground masks and truth."""
+        """Both sweeps of pair ``index`` (every row), their times, ground masks and truth.
+
+        The truth where both sweeps are annotated; a log annotated at some sweeps only
+        is scored there.
+        """
         t0, t1 = (int(t) for t in self.sweep_timestamps[index : index + 2])
         truth = None
-        if self.has_annotations:
+        if self.has_annotations and np.isin([t0, t1], self.annotations["timestamps"]).all():
             scene = _load_pair(
                 self, index, False, _MIN_INTERIOR_POINTS, _BOX_EXPANSION, _DYNAMIC_THRESHOLD
             )
@@ -264,6 +268,12 @@ class Argoverse2PairJob:
                 "ground-truth flow to fit on; --pairs truth needs the annotations."
             )
         pair = log.sweep_pair(self.index)
+        if pair.truth is None:
+            t0, t1 = log.sweep_timestamps[self.index : self.index + 2]
+            raise ValueError(
+                f"{log.annotations_path}: no cuboid annotated at {t0} or {t1} ns: no "
+                "ground-truth flow for this pair; --pairs truth needs both annotated."
+            )
         data = _pair_data(
             pair.a,
             pair.sweep,

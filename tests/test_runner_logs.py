@@ -163,6 +163,13 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
         assert table["is_dynamic"].to_numpy()[car].all()
         building = slice(SIZES[k][0], n - SIZES[k][2])
         assert not table["is_dynamic"].to_numpy()[building].any()
+    # A run resumed after an interruption between a job's result and its challenge file
+    # writes the file from the result.
+    path = out / SCENE_FLOW_FOLDER / "log" / f"{STAMPS[0]}.feather"
+    whole = path.read_bytes()
+    path.unlink()
+    assert main(["run", str(log), "--scheduler", scheduler, "-q"]) == 0
+    assert pd.read_csv(out / "summary.csv")["resumed"].all() and path.read_bytes() == whole
     # Without a map the ground is unknown: dropping it is each job's error.
     capsys.readouterr()
     command = ["run", str(log), "--ground", "drop", "--scheduler", scheduler, "-q"]

@@ -308,8 +308,10 @@ def run(args):
             topic=args.topic,
         )
     try:
-        if args.overwrite and (out / "jobs").is_dir():
-            shutil.rmtree(out / "jobs")  # only result files, checked above
+        if args.overwrite:  # only result files, checked above
+            for folder in ("jobs", "av2_scene_flow"):
+                if (out / folder).is_dir():
+                    shutil.rmtree(out / folder)
         out.mkdir(parents=True, exist_ok=True)
         record = {"configuration": configuration, "jobs": len(jobs)}
         with mmio.atomic_write(out / "run.json", "w") as handle:
