@@ -71,7 +71,7 @@ def _sweeps(seed=2):
     return sweeps
 
 
-def _write_log(folder, *, annotations=True, map_=True, seed=2):
+def _write_log(folder, *, annotations=True, map_=True, seed=2, annotated=STAMPS):
     cuboids = [
         dict(
             timestamp_ns=t,
@@ -81,6 +81,7 @@ def _write_log(folder, *, annotations=True, map_=True, seed=2):
             pose=_pose(8.0 + 0.5 * k, 3, 1.0),
         )
         for k, t in enumerate(STAMPS)
+        if t in annotated
     ]
     ego = {t: _pose(1.0 * k) for k, t in enumerate(STAMPS)}
     log = write_argoverse2_log(folder, _sweeps(seed), ego, cuboids)
@@ -247,6 +248,17 @@ def test_split_with_broken_logs_gives_failed_rows_and_the_others_go_on(tmp_path,
     assert summary.loc[b0, "moving_found"] == 1.0 and summary.loc[b0, "iou"] > 0.9
     assert np.isnan(summary.loc[a0, "iou"]) and np.isnan(summary.loc[a0, "moving_found"])
     assert sorted(p.name for p in (out / SCENE_FLOW_FOLDER).iterdir()) == ["a", "b"]
+
+
+def test_a_log_annotated_at_some_sweeps_is_scored_where_both_are(tmp_path):
+    log = _write_log(tmp_path / "log", annotated=STAMPS[:2])
+    first, second = (job.load() for job in dataset_jobs(log))
+    assert {"labels_true", "flow_true"} <= set(first)
+    assert not {"labels_true", "flow_true"} & set(second)
+    truth_jobs = dataset_jobs(log, pairs="truth")
+    assert truth_jobs[0].load()["pairs"] == "truth"
+    with pytest.raises(ValueError, match=f"no cuboid annotated at {STAMPS[1]} or {STAMPS[2]}"):
+        truth_jobs[1].load()
 
 
 # --------------------------------------------------------------------------- --pairs truth

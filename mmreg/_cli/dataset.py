@@ -57,8 +57,9 @@ log holds it; each pair is fitted as SweepRegistration.fit([a | a + flow], sweep
   - keep: registered as ordinary points;
   - drop: removed before the fit, by the map's rule (a log without a map fails).
 
-Capture times: an Argoverse 2 sweep pair hands the capture time of every point (the
-sweep files' offset_ns, seconds after each sweep's timestamp) and the time between the
+Capture times: an Argoverse 2 sweep pair (or a bag's, with a per-point time field) hands
+the capture time of every point (the sweep files' offset_ns, seconds after each sweep's
+timestamp) and the time between the
 two sweeps to SweepRegistration, which moves each moving object's points back to where
 the object was at its sweep's timestamp inside the ICP (deskewing). Sweeps whose offsets
 are all zero are registered without; --no-capture-times turns it off. The summary's
@@ -146,9 +147,9 @@ def add_arguments(parser):
         "--pairs",
         choices=PAIRS,
         default="auto",
-        help="what a job fits: raw 'sweeps' (LiDAR logs' default), the ground-'truth' flow "
-        "(Argoverse 2; the fit sees the answer), 'aligned' frames (frames' default); see "
-        "above",
+        help="what a job fits: 'sweeps', two raw sweeps (LiDAR logs' default); 'truth', "
+        "an Argoverse 2 log's ground-truth flow (the fit sees the answer); 'aligned' frames "
+        "(frames' default); see above",
     )
     parser.add_argument(
         "--flow",
@@ -182,8 +183,9 @@ def add_arguments(parser):
         "--no-capture-times",
         dest="capture_times",
         action="store_false",
-        help="Argoverse 2 with --pairs sweeps: do not deskew the moving objects by the "
-        "points' capture times (offset_ns); register as if each sweep were taken at once",
+        help="sweep pairs (Argoverse 2, bags with per-point times): do not deskew the "
+        "moving objects by the points' capture times; register as if each sweep were "
+        "taken at once",
     )
     parser.add_argument(
         "--overwrite",
