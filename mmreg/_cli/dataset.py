@@ -59,11 +59,11 @@ log holds it; each pair is fitted as SweepRegistration.fit([a | a + flow], sweep
 
 Capture times: an Argoverse 2 sweep pair (or a bag's, with a per-point time field) hands
 the capture time of every point (the sweep files' offset_ns, seconds after each sweep's
-timestamp) and the time between the
-two sweeps to SweepRegistration, which moves each moving object's points back to where
-the object was at its sweep's timestamp inside the ICP (deskewing). Sweeps whose offsets
-are all zero are registered without; --no-capture-times turns it off. The summary's
-capture_times column says which jobs had them.
+timestamp) and the time between the two sweeps to SweepRegistration, which moves each
+moving object's points back to where the object was at its sweep's timestamp inside the
+ICP (deskewing). Sweeps whose offsets are all zero are registered without;
+--no-capture-times turns it off. The summary's capture_times column says which jobs had
+them, its ground column what became of the ground (masks, dropped, kept).
 
 Written into --out: jobs/<job>.npz per job (labels, rotations, translations, sigmas,
 flow, moving, indices: the rows of the first sweep's file the job fitted, so that
