@@ -22,9 +22,10 @@ and ``sweep_ground`` (m,): the map's ground points. ``pairs`` says what the fit 
   logs (a split): one job per consecutive sweep pair (N sweeps, N - 1 jobs), the two raw
   sweeps registered from the points alone; scored where the log has annotations; a log
   of a split that cannot be read is one failed job, the others go on;
-* a KITTI odometry or SemanticKITTI sequence (``velodyne/*.bin``) or a ROS bag's
-  PointCloud2 topic (read by :func:`mmreg.datasets.open_sequence`): the same, frame by
-  frame, without truth;
+* a KITTI odometry or SemanticKITTI sequence (``velodyne/*.bin``), a ROS bag's
+  PointCloud2 topic, or a folder of LiDAR sweep files (``.bin``, ``.pcd.bin``,
+  ``.feather``), read by :func:`mmreg.datasets.open_sequence`: the same, frame by frame,
+  without truth;
 * a folder of frames (``*.ply``, ``*.pcd``, ``*.xyz``, or ``*.npy`` of shape (n, 3)), in
   name order: one job per consecutive pair, frame ``k + 1`` giving the b-points of frame
   ``k`` row by row (the clouds must be index-aligned), or with ``pairs="sweeps"`` two raw
@@ -463,11 +464,19 @@ class SequenceSweepPairJob:
 
 
 def _is_sequence(path):
-    """A KITTI sequence folder or a ROS bag (a ``.bag``, ``.db3``, ``.mcap`` or folder)."""
+    """A KITTI sequence folder, a ROS bag (a ``.bag``, ``.db3``, ``.mcap`` or folder), or a
+    folder of LiDAR sweep files (KITTI ``.bin``, nuScenes ``.pcd.bin``, ``.feather``)."""
     from mmreg._lidar_files import lidar_kind
 
     path = Path(path)
-    return (path.is_dir() and (path / "velodyne").is_dir()) or lidar_kind(path) == "bag"
+    if lidar_kind(path) == "bag":
+        return True
+    if not path.is_dir():
+        return False
+    if (path / "velodyne").is_dir():
+        return True
+    kinds = {lidar_kind(p) for p in path.iterdir() if p.is_file() and not p.name.startswith(".")}
+    return bool(kinds) and kinds <= {"kitti", "nuscenes", "feather"}
 
 
 def _sequence_jobs(path, ground, capture_times, topic):

@@ -376,6 +376,13 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
         moving = arrays["labels"][sizes[k][0] :]
         assert len(np.unique(still)) == len(np.unique(moving)) == 1 and still[0] != moving[0]
     assert not (out / SCENE_FLOW_FOLDER).exists()  # the challenge's files: Argoverse 2 only
+    # The velodyne folder alone is a folder of sweep files: the same pairs.
+    alone = dataset_jobs(sequence / "velodyne")
+    assert [job.name for job in alone] == ["000000", "000001"]
+    for job, again in zip(jobs, alone, strict=True):
+        one, two = job.load(), again.load()
+        np.testing.assert_array_equal(one["X"], two["X"])
+        np.testing.assert_array_equal(one["sweep"], two["sweep"])
     # A torn scan fails its jobs; KITTI has no ground map to drop by.
     (sequence / "velodyne" / "000002.bin").write_bytes(b"\0" * 20)
     assert (
