@@ -37,6 +37,7 @@ and ``sweep_ground`` (m,): the map's ground points. ``pairs`` says what the fit 
 
 import dataclasses
 import os
+import re
 from collections import Counter
 from pathlib import Path
 
@@ -70,6 +71,7 @@ FRAME_EXTENSIONS = (".ply", ".pcd", ".xyz")
 CORRESPONDENCE_EXTENSIONS = (".npy", ".npz", ".csv", ".txt")
 PAIRS = ("auto", "sweeps", "truth", "aligned")
 GROUND = ("auto", "keep", "drop")
+_SWEEP_FILE = re.compile(r"^\d+\.feather$")  # an Argoverse 2 sweep: <timestamp_ns>.feather
 LAYOUTS = ("auto", "argoverse2", "sequence", "frames", "correspondences")
 
 
@@ -471,12 +473,15 @@ def _is_sequence(path):
     path = Path(path)
     if lidar_kind(path) == "bag":
         return True
-    if not path.is_dir():
+    if not path.is_dir() or _is_argoverse2_log(path):
         return False
     if (path / "velodyne").is_dir():
         return True
-    kinds = {lidar_kind(p) for p in path.iterdir() if p.is_file() and not p.name.startswith(".")}
-    return bool(kinds) and kinds <= {"kitti", "nuscenes", "feather"}
+    # Sweep files only: a log's own tables (annotations.feather, ...) are not sweeps.
+    files = [p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")]
+    return bool(files) and all(
+        lidar_kind(p) in ("kitti", "nuscenes") or _SWEEP_FILE.match(p.name) for p in files
+    )
 
 
 def _sequence_jobs(path, ground, capture_times, topic):

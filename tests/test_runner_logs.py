@@ -139,6 +139,10 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
     np.testing.assert_array_equal(data["sweep"], sweep)
     np.testing.assert_array_equal(data["indices"], np.arange(len(a)))
     assert not {"labels_true", "flow_true", "ground", "sweep_ground"} & set(data)
+    # Its sensors/lidar folder alone is a folder of sweep files: the same sweeps.
+    alone = dataset_jobs(log / "sensors" / "lidar")
+    assert [job.name for job in alone] == [job.name for job in jobs]
+    np.testing.assert_array_equal(alone[0].load()["X"], a)
     monkeypatch.chdir(tmp_path)
     assert main(["run", str(log), "--scheduler", scheduler, "-q"]) == 0
     (out,) = [p for p in tmp_path.iterdir() if p.name != "data"]
