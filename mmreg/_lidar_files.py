@@ -154,7 +154,9 @@ class Bag:
     """The PointCloud2 messages of one topic of a ROS 1 or ROS 2 bag, read one at a time.
 
     The bag is opened for each read (an open reader holds a file or a database
-    connection, which neither pickles nor survives a fork).
+    connection, which neither pickles nor survives a fork). Opening it reads the topic's
+    messages once, to index their receive times; ``read(k)`` then seeks to message ``k``
+    by its time.
 
     Parameters
     ----------

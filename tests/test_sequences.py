@@ -359,3 +359,16 @@ def test_register_refuses_bad_bags_in_one_line(tmp_path, capsys, setup, extra, m
     assert len(err.strip().splitlines()) == 1 and err.startswith("mmreg: error: "), err
     assert re.search(message, err), err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_bag_without_rosbags_names_the_extra(tmp_path, monkeypatch, capsys):
+    import sys
+
+    frames, _ = scene_frames(2)
+    path = write_bag(tmp_path / "run.bag", frames, ros=1)
+    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # as if not installed
+    with pytest.raises(ImportError, match=re.escape('pip install "mmreg[ros]"')):
+        open_sequence(path)
+    assert main(["register", str(path), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and 'pip install "mmreg[ros]"' in err

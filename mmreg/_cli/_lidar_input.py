@@ -118,7 +118,10 @@ def read_frames(args):
 
     k = 0 if args.frame is None else args.frame
     with reading(args.input):
-        sequence = open_sequence(args.input, topic=args.topic)
+        try:
+            sequence = open_sequence(args.input, topic=args.topic)
+        except ImportError as error:  # a bag without the optional rosbags package
+            raise CLIError(f"{args.input}: {error}") from None
         n = len(sequence)
         if not 0 <= k < n - 1:
             last = f"0 to {n - 2}" if n > 1 else "none: it needs two frames"

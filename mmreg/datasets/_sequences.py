@@ -158,7 +158,7 @@ class _Sequence:
         return np.linalg.inv(poses[j]) @ poses[i]
 
 
-def _read_frame_file(path, k):
+def _read_frame_file(path):
     path = _check_readable(path, "a frame")
     points, _, times = _read_point_file(path, "the points")
     return points, times
@@ -306,7 +306,7 @@ class KittiSequence(_Sequence):
         return values
 
     def _frame(self, k):
-        points, _ = _read_frame_file(self._files[k], k)
+        points, _ = _read_frame_file(self._files[k])
         stamp = None if self.timestamps is None else float(self.timestamps[k])
         return Frame(points, stamp, None, k, str(self._files[k]), self._pose(k))
 
@@ -371,7 +371,7 @@ class Argoverse2Sweeps(_Sequence):
         return np.stack([by_time[int(t)] for t in self._stamps_ns])
 
     def _frame(self, k):
-        points, times = _read_frame_file(self._files[k], k)
+        points, times = _read_frame_file(self._files[k])
         stamp = float(self.timestamps[k])
         return Frame(points, stamp, times, k, str(self._files[k]), self._pose(k))
 
@@ -429,7 +429,7 @@ class FrameFolder(_Sequence):
         self._files = [self.path / name for name in self.names]
 
     def _frame(self, k):
-        points, times = _read_frame_file(self._files[k], k)
+        points, times = _read_frame_file(self._files[k])
         return Frame(points, None, times, k, str(self._files[k]))
 
 
