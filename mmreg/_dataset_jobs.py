@@ -368,6 +368,9 @@ def _argoverse2_jobs(log_dir, ground, pairs, capture_times, flow_dir, prefix="")
             raise
         return [BrokenLogJob(log_dir.name, str(log_dir), " ".join(str(error).split()))]
     name = log_dir.resolve().name
+    if len(stamps) < 2 and prefix:  # a split's log that gives no pair: said, not skipped
+        error = f"{log_dir / 'sensors' / 'lidar'}: one sweep only; a job is a pair of sweeps."
+        return [BrokenLogJob(log_dir.name, str(log_dir), error)]
     jobs = []
     for i in range(len(stamps) - 1):  # N sweeps: N - 1 consecutive pairs
         job_name, challenge = f"{prefix}{stamps[i]}", f"{name}/{stamps[i]}.feather"

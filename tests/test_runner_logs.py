@@ -240,6 +240,9 @@ def test_split_with_broken_logs_gives_failed_rows_and_the_others_go_on(tmp_path,
     sweep = torn / "sensors" / "lidar" / f"{STAMPS[2]}.feather"
     sweep.write_bytes(sweep.read_bytes()[:100])  # truncated: the pair (1, 2) cannot load
     (split / "c" / "sensors" / "lidar").mkdir(parents=True)  # no sweep at all
+    single = split / "d" / "sensors" / "lidar"
+    single.mkdir(parents=True)
+    shutil.copy(torn / "sensors" / "lidar" / f"{STAMPS[0]}.feather", single)  # no pair
     out = tmp_path / "out"
     assert main(["run", str(split), "--out", str(out), "--scheduler", scheduler, "-q"]) == 1
     assert "failed" in capsys.readouterr().err
@@ -248,6 +251,7 @@ def test_split_with_broken_logs_gives_failed_rows_and_the_others_go_on(tmp_path,
     assert summary.loc[[a0, a1, b0], "status"].tolist() == ["done"] * 3
     assert summary.loc[b1, "status"] == "error" and "truncated" in summary.loc[b1, "error"]
     assert summary.loc["c", "status"] == "error" and "no LiDAR sweeps" in summary.loc["c", "error"]
+    assert summary.loc["d", "status"] == "error" and "one sweep only" in summary.loc["d", "error"]
     # Log b has annotations: scored; log a has none.
     assert summary.loc[b0, "moving_found"] == 1.0 and summary.loc[b0, "iou"] > 0.9
     assert np.isnan(summary.loc[a0, "iou"]) and np.isnan(summary.loc[a0, "moving_found"])
