@@ -367,7 +367,7 @@ def _argoverse2_jobs(log_dir, ground, pairs, capture_times, flow_dir, prefix="")
         if not prefix:  # a single log: the user's input is wrong
             raise
         return [BrokenLogJob(log_dir.name, str(log_dir), " ".join(str(error).split()))]
-    name = log_dir.resolve().name
+    name = Path(os.path.abspath(log_dir)).name  # the log id as the user has it (symlinks too)
     if len(stamps) < 2 and prefix:  # a split's log that gives no pair: said, not skipped
         error = f"{log_dir / 'sensors' / 'lidar'}: one sweep only; a job is a pair of sweeps."
         return [BrokenLogJob(log_dir.name, str(log_dir), error)]

@@ -139,13 +139,19 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
     np.testing.assert_array_equal(data["sweep"], sweep)
     np.testing.assert_array_equal(data["indices"], np.arange(len(a)))
     assert not {"labels_true", "flow_true", "ground", "sweep_ground"} & set(data)
+    # The challenge's files are named by the log's folder as given, a symbolic link too.
+    assert jobs[0].challenge == f"log/{STAMPS[0]}.feather"
+    if hasattr(os, "symlink") and sys.platform != "win32":
+        (tmp_path / "0c6e62d7").symlink_to(log, target_is_directory=True)
+        linked = dataset_jobs(tmp_path / "0c6e62d7")
+        assert linked[1].challenge == f"0c6e62d7/{STAMPS[1]}.feather"
     # Its sensors/lidar folder alone is a folder of sweep files: the same sweeps.
     alone = dataset_jobs(log / "sensors" / "lidar")
     assert [job.name for job in alone] == [job.name for job in jobs]
     np.testing.assert_array_equal(alone[0].load()["X"], a)
     monkeypatch.chdir(tmp_path)
     assert main(["run", str(log), "--scheduler", scheduler, "-q"]) == 0
-    (out,) = [p for p in tmp_path.iterdir() if p.name != "data"]
+    (out,) = [p for p in tmp_path.iterdir() if p.name not in ("data", "0c6e62d7")]
     assert re.fullmatch(r"log-mmreg-run-[0-9a-f]{8}", out.name)
     summary = pd.read_csv(out / "summary.csv")
     assert summary["status"].tolist() == ["done", "done"]

@@ -4,6 +4,7 @@ import contextlib
 import hashlib
 import importlib.util
 import json
+import os
 import shutil
 import sys
 import time
@@ -285,7 +286,8 @@ def default_out(args):
     """``<DATASET's name>-mmreg-run-<8 hex digits of its full path>``: never shared."""
     path = str(Path(args.dataset).resolve())
     digest = hashlib.sha256(path.encode("utf-8", "surrogateescape")).hexdigest()[:8]
-    return f"{Path(path).name}-mmreg-run-{digest}"
+    name = Path(os.path.abspath(args.dataset)).name or Path(path).name  # as the user has it
+    return f"{name}-mmreg-run-{digest}"
 
 
 def run(args):
