@@ -3,25 +3,33 @@
 A job is a small frozen dataclass (picklable: it holds paths, not data) with a unique
 ``name`` and a ``load()`` that reads its input where it runs (a Dask worker), returning
 a dict with ``X`` (n, 6) and, when the data have them, ``labels_true`` (n,) (negative:
-unknown or outlier, not scored) and ``flow_true`` (n, 3). A job of two raw sweeps
-(``pairs="sweeps"``) gives ``X`` (n, 3), the first sweep, and ``sweep`` (m, 3), the second
-(any size, any order), for :class:`mmreg.SweepRegistration`; an Argoverse 2 one also gives
-the capture times of both sweeps' points, ``times`` (n,) and ``sweep_times`` (m,) (seconds
-after each sweep's timestamp, from ``offset_ns``), and ``interval``, the seconds between
-the two timestamps, unless every offset is zero or ``capture_times=False``.
+unknown or outlier, not scored) and ``flow_true`` (n, 3). A job of two sweeps gives ``X``
+(n, 3), the first sweep's points it uses (or (n, 6), ``[a | a + flow]`` with a given
+flow), and ``sweep`` (m, 3), the second (any size, any order), for
+:class:`mmreg.SweepRegistration`, with ``indices`` (n,): the rows of the first sweep's
+file that ``X`` holds, and ``sweep_points``: every row of that file. An Argoverse 2 one
+also gives the capture times of the points used, ``times`` (n,) and ``sweep_times``
+(m,) (seconds after each sweep's timestamp, from ``offset_ns``), and ``interval``, the
+seconds between the two timestamps, unless every offset is zero or
+``capture_times=False``; and with ``ground="auto"`` on a log with a map, ``ground`` (n,)
+and ``sweep_ground`` (m,): the map's ground points. ``pairs`` says what the fit is given:
+``"sweeps"``, ``"flow"`` (a network's), ``"truth"`` (the ground-truth flow).
 
 :func:`dataset_jobs` lists the jobs of a folder:
 
-* an Argoverse 2 log (it holds ``sensors/lidar``): one job per consecutive sweep pair,
-  the ground-truth flow as the correspondences and the truth to score against;
-* a folder of Argoverse 2 logs: the jobs of every log;
+* an Argoverse 2 log (it holds ``sensors/lidar``; the annotations, poses and map are
+  optional: the test split and the LiDAR dataset have no annotations), or a folder of
+  logs (a split): one job per consecutive sweep pair (N sweeps, N - 1 jobs), the two raw
+  sweeps registered from the points alone; scored where the log has annotations; a log
+  of a split that cannot be read is one failed job, the others go on;
+* a KITTI odometry or SemanticKITTI sequence (``velodyne/*.bin``), a ROS bag's
+  PointCloud2 topic, or a folder of LiDAR sweep files (``.bin``, ``.pcd.bin``,
+  ``.feather``), read by :func:`mmreg.datasets.open_sequence`: the same, frame by frame,
+  without truth;
 * a folder of frames (``*.ply``, ``*.pcd``, ``*.xyz``, or ``*.npy`` of shape (n, 3)), in
   name order: one job per consecutive pair, frame ``k + 1`` giving the b-points of frame
-  ``k`` row by row (the clouds must be index-aligned);
-* with ``pairs="sweeps"``, the frames or an Argoverse 2 log's sweeps are raw sweeps: one
-  job per consecutive pair, sweep ``k`` registered to sweep ``k + 1`` from the points
-  alone (any sizes and orders); an Argoverse 2 job is still scored against the true flow
-  of sweep ``k``, and gives its points' capture times (``capture_times``);
+  ``k`` row by row (the clouds must be index-aligned), or with ``pairs="sweeps"`` two raw
+  sweeps of any sizes and orders;
 * a folder of correspondence files (``*.npy`` (n, 6), ``*.npz``, ``*.csv``, ``*.txt``):
   one job per file. An ``.npz`` may also hold the truth: ``labels`` (n,) and ``flow``
   (n, 3).
@@ -29,23 +37,42 @@ the two timestamps, unless every offset is zero or ``capture_times=False``.
 
 import dataclasses
 import os
+import re
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
+from sklearn.utils import Bunch
+
+from mmreg.datasets._argoverse2 import (
+    _BOX_EXPANSION,
+    _DYNAMIC_THRESHOLD,
+    _GROUND_THRESHOLD,
+    _MIN_INTERIOR_POINTS,
+    _load_pair,
+    _Log,
+    _MissingPathError,
+    _read_points,
+    read_scene_flow,
+)
 
 __all__ = [
     "Argoverse2PairJob",
     "Argoverse2SweepPairJob",
+    "BrokenLogJob",
     "CorrespondenceFileJob",
     "FramePairJob",
+    "SequenceSweepPairJob",
     "SweepPairJob",
     "dataset_jobs",
 ]
 
 FRAME_EXTENSIONS = (".ply", ".pcd", ".xyz")
 CORRESPONDENCE_EXTENSIONS = (".npy", ".npz", ".csv", ".txt")
-PAIRS = ("aligned", "sweeps")
+PAIRS = ("auto", "sweeps", "truth", "aligned")
+GROUND = ("auto", "keep", "drop")
+_SWEEP_FILE = re.compile(r"^\d+\.feather$")  # an Argoverse 2 sweep: <timestamp_ns>.feather
+LAYOUTS = ("auto", "argoverse2", "sequence", "frames", "correspondences")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,88 +144,246 @@ class CorrespondenceFileJob:
         return data
 
 
+# --------------------------------------------------------------------------- sweep pairs
+def _pair_data(
+    a,
+    sweep,
+    *,
+    ground,
+    masks,
+    flow=None,
+    times=None,
+    sweep_times=None,
+    interval=None,
+    truth=None,
+    where="the log",
+):
+    """What a job of two sweeps hands the runner, from the sweeps as the files hold them.
+
+    ``a`` (n, 3) and ``sweep`` (m, 3): every row of the two files; ``masks``: their known
+    ground points (two boolean arrays) or None; ``flow``: correspondences for every row of
+    ``a`` (a network's flow or the truth) or None (raw sweeps); ``truth``: ``(labels,
+    flow)`` of every row of ``a``, or None. The rows used are ``indices`` (all of them,
+    or those off the ground with ``ground="drop"``).
+    """
+    if ground == "drop":
+        if masks is None:
+            raise ValueError(
+                f"{where}: has no ground map (an Argoverse 2 log's map/ folder, with the "
+                "ego poses), so its ground is unknown: --ground drop needs it; use --ground "
+                "auto or keep."
+            )
+        keep, keep_sweep = ~masks[0], ~masks[1]
+    else:
+        keep, keep_sweep = np.ones(len(a), bool), np.ones(len(sweep), bool)
+    indices = np.flatnonzero(keep)
+    X = a[indices]
+    if flow is not None:
+        X = np.hstack([X, X + flow[indices]])
+    data = {"X": X, "sweep": sweep[keep_sweep], "indices": indices, "sweep_points": a}
+    data["ground_rule"] = "dropped" if ground == "drop" else "kept"
+    if ground == "auto" and masks is not None:
+        data["ground"], data["sweep_ground"] = masks[0][indices], masks[1][keep_sweep]
+    if (
+        times is not None
+        and sweep_times is not None
+        and (np.any(times != 0) or np.any(sweep_times != 0))
+    ):
+        data.update(times=times[indices], sweep_times=sweep_times[keep_sweep], interval=interval)
+    if truth is not None:
+        data["labels_true"], data["flow_true"] = truth[0][indices], truth[1][indices]
+    return data
+
+
+class _PartialLog(_Log):
+    """An Argoverse 2 log whose annotations, ego poses or map may be missing.
+
+    The sensor dataset's test split has no annotations; the LiDAR dataset has no
+    annotations either. Only the sweeps are required: the map (with the poses) gives the
+    ground, the annotations (with the poses) the truth to score against.
+    """
+
+    def __init__(self, log_dir):
+        try:
+            super().__init__(log_dir)
+        except _MissingPathError:
+            if not hasattr(self, "map_dir"):  # the sweeps themselves are missing
+                raise
+        self.has_poses = self.poses_path.is_file()
+        self.has_annotations = self.has_poses and self.annotations_path.is_file()
+        self.has_map = self.has_poses and self.map_dir.is_dir()
+
+    def ground(self, points_ego, city_SE3_ego, threshold=_GROUND_THRESHOLD):
+        if not self.has_map:  # the truth's loader asks for it: no map, no known ground
+            return np.zeros(len(points_ego), bool)
+        return super().ground(points_ego, city_SE3_ego, threshold)
+
+    def sweep_pair(self, index):
+        """Both sweeps of pair ``index`` (every row), their times, ground masks and truth.
+
+        The truth where both sweeps are annotated; a log annotated at some sweeps only
+        is scored there.
+        """
+        t0, t1 = (int(t) for t in self.sweep_timestamps[index : index + 2])
+        truth = None
+        if self.has_annotations and np.isin([t0, t1], self.annotations["timestamps"]).all():
+            scene = _load_pair(
+                self, index, False, _MIN_INTERIOR_POINTS, _BOX_EXPANSION, _DYNAMIC_THRESHOLD
+            )
+            a, times, sweep, sweep_times = scene.a, scene.times, scene.sweep2, scene.sweep2_times
+            masks = (scene.ground, scene.sweep2_ground) if self.has_map else None
+            truth = (scene.labels, scene.flow)
+        else:
+            (a, times), (sweep, sweep_times) = (_read_points(self.sweep_paths[t]) for t in (t0, t1))
+            masks = None
+            if self.has_map:
+                masks = (self.ground(a, self.pose(t0)), self.ground(sweep, self.pose(t1)))
+        return Bunch(
+            a=a,
+            sweep=sweep,
+            times=times,
+            sweep_times=sweep_times,
+            masks=masks,
+            truth=truth,
+            interval=(t1 - t0) * 1e-9,
+        )
+
+
 @dataclasses.dataclass(frozen=True)
 class Argoverse2PairJob:
-    """Sweep pair ``index`` of an Argoverse 2 log: the true flow and labels."""
+    """Sweep pair ``index`` of an Argoverse 2 log fitted on the ground-truth flow.
 
-    name: str
-    log_dir: str
-    index: int
-    drop_ground: bool = True
-
-    def load(self):
-        from mmreg.datasets import load_argoverse2
-
-        scene = load_argoverse2(self.log_dir, self.index, drop_ground=self.drop_ground)
-        return {"X": scene.X, "labels_true": scene.labels, "flow_true": scene.flow}
-
-
-@dataclasses.dataclass(frozen=True)
-class Argoverse2SweepPairJob:
-    """Sweep pair ``index`` of an Argoverse 2 log as two raw sweeps, scored by the true flow.
-
-    ``X`` is sweep t's points and ``sweep`` sweep t+1's (both without the ground when
-    ``drop_ground``); the true flow and labels are those of sweep t. With
-    ``capture_times``, ``times`` and ``sweep_times`` are the points' capture times (the
-    sweep files' ``offset_ns``, in seconds) and ``interval`` the seconds between the two
-    sweeps' timestamps, for ``SweepRegistration.fit``'s deskewing; left out when the
-    files have no offsets or all of them are zero (nothing to deskew).
+    ``X`` is ``[a | a + flow]`` with the true flow (``pairs="truth"``): the fit sees the
+    answer, and its scores measure the clustering alone. Needs the log's annotations.
     """
 
     name: str
     log_dir: str
     index: int
-    drop_ground: bool = True
-    capture_times: bool = True
+    ground: str = "auto"
+    challenge: str = ""
 
     def load(self):
-        from mmreg.datasets import load_argoverse2
-
-        scene = load_argoverse2(self.log_dir, self.index, drop_ground=self.drop_ground)
-        if scene.sweep2 is None:
+        log = _PartialLog(self.log_dir)
+        if not log.has_annotations:
             raise ValueError(
-                f"{self.log_dir}: no lidar sweep at {scene.timestamps[1]}, the next pose's "
-                "time; pairs='sweeps' needs both sweeps."
+                f"{self.log_dir}: has no annotations.feather (or no ego poses): no "
+                "ground-truth flow to fit on; --pairs truth needs the annotations."
             )
-        data = {
-            "X": scene.a,
-            "sweep": scene.sweep2,
-            "labels_true": scene.labels,
-            "flow_true": scene.flow,
-        }
-        times, sweep_times = scene.times, scene.sweep2_times
-        if (
-            self.capture_times
-            and times is not None
-            and sweep_times is not None
-            and (np.any(times != 0) or np.any(sweep_times != 0))
-        ):
-            data.update(times=times, sweep_times=sweep_times, interval=float(scene.dt))
-        return data
+        pair = log.sweep_pair(self.index)
+        if pair.truth is None:
+            t0, t1 = log.sweep_timestamps[self.index : self.index + 2]
+            raise ValueError(
+                f"{log.annotations_path}: no cuboid annotated at {t0} or {t1} ns: no "
+                "ground-truth flow for this pair; --pairs truth needs both annotated."
+            )
+        data = _pair_data(
+            pair.a,
+            pair.sweep,
+            ground=self.ground,
+            masks=pair.masks,
+            flow=pair.truth[1],
+            truth=pair.truth,
+            where=self.log_dir,
+        )
+        data.pop("sweep")  # the truth is the correspondence: no second sweep to fit on
+        return data | {"pairs": "truth"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Argoverse2SweepPairJob:
+    """Sweep pair ``index`` of an Argoverse 2 log as two raw sweeps (or refined ``flow``).
+
+    ``X`` is sweep t's points and ``sweep`` sweep t+1's, all rows or (``ground="drop"``)
+    those off the map's ground; ``indices`` are the rows of sweep t used. With ``flow``
+    (a feather file of the challenge's layout, one row per point of sweep t), ``X`` is
+    ``[a | a + flow]``: SweepRegistration refines it on the second sweep. ``ground="auto"``
+    adds the map's ground masks (``ground``, ``sweep_ground``) when the log has a map.
+    The truth (labels, flow) when the log has annotations. With ``capture_times``,
+    ``times``, ``sweep_times`` (``offset_ns`` in seconds) and ``interval`` (seconds
+    between the timestamps), unless every offset is zero.
+    """
+
+    name: str
+    log_dir: str
+    index: int
+    ground: str = "auto"
+    capture_times: bool = True
+    flow: str = ""
+    challenge: str = ""
+
+    def load(self):
+        log = _PartialLog(self.log_dir)
+        pair = log.sweep_pair(self.index)
+        flow = None
+        if self.flow:
+            flow = read_scene_flow(self.flow, n=len(pair.a))
+        timed = self.capture_times
+        data = _pair_data(
+            pair.a,
+            pair.sweep,
+            ground=self.ground,
+            masks=pair.masks,
+            flow=flow,
+            times=pair.times if timed else None,
+            sweep_times=pair.sweep_times if timed else None,
+            interval=pair.interval,
+            truth=pair.truth,
+            where=self.log_dir,
+        )
+        return data | {"pairs": "flow" if flow is not None else "sweeps"}
+
+
+@dataclasses.dataclass(frozen=True)
+class BrokenLogJob:
+    """A log whose sweeps cannot even be listed: one failed row, the other logs go on."""
+
+    name: str
+    log_dir: str
+    error: str
+
+    def load(self):
+        raise ValueError(self.error)
 
 
 def _is_argoverse2_log(folder):
     return (Path(folder) / "sensors" / "lidar").is_dir()
 
 
-def _argoverse2_jobs(log_dir, drop_ground, pairs, capture_times, prefix=""):
-    from mmreg.datasets import Argoverse2Log
+def _flow_file(flow_dir, log_name, timestamp):
+    """``DIR/<log>/<timestamp_ns>.feather`` if DIR has the log's folder, else ``DIR/<ts>``."""
+    if not flow_dir:
+        return ""
+    folder = Path(flow_dir) / log_name
+    folder = folder if folder.is_dir() else Path(flow_dir)
+    return str(folder / f"{timestamp}.feather")
 
-    log = Argoverse2Log(log_dir)
-    stamps = log.timestamps
-    if pairs == "sweeps":
-        # Only pairs of sweeps: the last sweep of a truncated log may be paired with an
-        # annotated time that has no sweep (its flow is known, its points are not).
-        return [
-            Argoverse2SweepPairJob(
-                f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground, capture_times
+
+def _argoverse2_jobs(log_dir, ground, pairs, capture_times, flow_dir, prefix=""):
+    log_dir = Path(log_dir)
+    try:
+        stamps = _PartialLog(log_dir).sweep_timestamps
+    except (OSError, ValueError) as error:
+        if not prefix:  # a single log: the user's input is wrong
+            raise
+        return [BrokenLogJob(log_dir.name, str(log_dir), " ".join(str(error).split()))]
+    name = Path(os.path.abspath(log_dir)).name  # the log id as the user has it (symlinks too)
+    if len(stamps) < 2 and prefix:  # a split's log that gives no pair: said, not skipped
+        error = f"{log_dir / 'sensors' / 'lidar'}: one sweep only; a job is a pair of sweeps."
+        return [BrokenLogJob(log_dir.name, str(log_dir), error)]
+    jobs = []
+    for i in range(len(stamps) - 1):  # N sweeps: N - 1 consecutive pairs
+        job_name, challenge = f"{prefix}{stamps[i]}", f"{name}/{stamps[i]}.feather"
+        if pairs == "truth":
+            jobs.append(Argoverse2PairJob(job_name, str(log_dir), i, ground, challenge))
+        else:
+            flow = _flow_file(flow_dir, name, stamps[i])
+            jobs.append(
+                Argoverse2SweepPairJob(
+                    job_name, str(log_dir), i, ground, capture_times, flow, challenge
+                )
             )
-            for i in range(len(stamps) - 1)
-        ]
-    return [
-        Argoverse2PairJob(f"{prefix}{stamps[i]}", str(log.log_dir), i, drop_ground)
-        for i in range(len(log))
-    ]
+    return jobs
 
 
 def _check_some(jobs, folder):
@@ -214,43 +399,175 @@ def _npy_columns(path):
     return shape[1] if len(shape) == 2 else None
 
 
-def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned", capture_times=True):
+def _check_choice(value, name, allowed):
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {allowed}; got {value!r}.")
+    return value
+
+
+def _ground_choice(ground, drop_ground):
+    if drop_ground is None:
+        return _check_choice(ground, "ground", GROUND)
+    if not isinstance(drop_ground, (bool, np.bool_)):
+        raise TypeError(f"drop_ground must be True or False; got {drop_ground!r}.")
+    return "drop" if drop_ground else "keep"
+
+
+def _valid_rows(points):
+    """Rows of a sweep that are returns: finite and not the all-zero "no return" row."""
+    return np.all(np.isfinite(points), axis=1) & np.any(points != 0, axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class SequenceSweepPairJob:
+    """Frames ``index`` and ``index + 1`` of a LiDAR sequence (a KITTI sequence, a ROS bag).
+
+    Read by :func:`mmreg.datasets.open_sequence` (``topic``: a bag's PointCloud2
+    topic). ``X`` is the first frame's returns (rows that are NaN or all zero, the
+    sensor's "no return", are left out: ``indices`` are the rows used), ``sweep`` the
+    next frame's; with ``capture_times``, the frames' per-point ``times`` (a bag's
+    ``t`` / ``time`` field) and the interval between their timestamps. No ground map
+    (``ground="drop"`` fails), no truth.
+    """
+
+    name: str
+    path: str
+    index: int
+    ground: str = "auto"
+    capture_times: bool = True
+    topic: str | None = None
+
+    def load(self):
+        from mmreg.datasets import open_sequence
+
+        sequence = open_sequence(self.path, topic=self.topic)
+        first, second = sequence[self.index], sequence[self.index + 1]
+        valid, sweep_valid = _valid_rows(first.points), _valid_rows(second.points)
+        if not valid.any() or not sweep_valid.any():
+            empty = first if not valid.any() else second
+            raise ValueError(f"{empty.source}: holds no valid point.")
+        timed = (
+            self.capture_times
+            and first.times is not None
+            and second.times is not None
+            and first.timestamp is not None
+            and second.timestamp is not None
+        )
+        data = _pair_data(
+            first.points[valid],
+            second.points[sweep_valid],
+            ground=self.ground,
+            masks=None,
+            times=first.times[valid] if timed else None,
+            sweep_times=second.times[sweep_valid] if timed else None,
+            interval=second.timestamp - first.timestamp if timed else None,
+            where=self.path,
+        )
+        data["indices"] = np.flatnonzero(valid)[data["indices"]]
+        data["sweep_points"] = first.points
+        return data | {"pairs": "sweeps"}
+
+
+def _is_sequence(path):
+    """A KITTI sequence folder, a ROS bag (a ``.bag``, ``.db3``, ``.mcap`` or folder), or a
+    folder of LiDAR sweep files (KITTI ``.bin``, nuScenes ``.pcd.bin``, ``.feather``)."""
+    from mmreg._lidar_files import lidar_kind
+
+    path = Path(path)
+    if lidar_kind(path) == "bag":
+        return True
+    if not path.is_dir() or _is_argoverse2_log(path):
+        return False
+    if (path / "velodyne").is_dir():
+        return True
+    # Sweep files only: a log's own tables (annotations.feather, ...) are not sweeps.
+    files = [p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")]
+    return bool(files) and all(
+        lidar_kind(p) in ("kitti", "nuscenes") or _SWEEP_FILE.match(p.name) for p in files
+    )
+
+
+def _sequence_jobs(path, ground, capture_times, topic):
+    from mmreg.datasets import open_sequence
+
+    sequence = open_sequence(path, topic=topic)
+    bag = sequence.kind == "bag"
+    names = [f"{k:06d}" if bag else Path(name).stem for k, name in enumerate(sequence.names)]
+    return [
+        SequenceSweepPairJob(names[k], str(path), k, ground, capture_times, topic)
+        for k in range(len(sequence) - 1)
+    ]
+
+
+def dataset_jobs(
+    path,
+    *,
+    layout="auto",
+    ground="auto",
+    pairs="auto",
+    capture_times=True,
+    flow=None,
+    topic=None,
+    drop_ground=None,
+):
     """The jobs of the dataset at ``path`` (a folder), in a stable order.
 
     Parameters
     ----------
     path : str or path-like
-        An Argoverse 2 log, a folder of logs, of frames or of correspondence files.
-    layout : {"auto", "argoverse2", "frames", "correspondences"}, default="auto"
-        What the folder holds; ``"auto"``: an Argoverse 2 log or folder of logs if it
-        looks like one, else frames when the files are point clouds or (n, 3) ``.npy``
-        arrays, else correspondence files.
-    drop_ground : bool, default=True
-        Argoverse 2: remove the ground points (by the log's ground height map).
-    pairs : {"aligned", "sweeps"}, default="aligned"
-        What a pair of consecutive frames or sweeps is. ``"aligned"``: correspondences,
-        row ``i`` of frame ``k + 1`` matching row ``i`` of frame ``k`` (Argoverse 2: the
-        true flow gives every point's match). ``"sweeps"``: two raw sweeps of any sizes
-        and orders, to register from the points alone with
-        :class:`mmreg.SweepRegistration` (Argoverse 2: still scored against the true
-        flow). Not for a folder of correspondence files.
+        An Argoverse 2 log or a folder of logs (a split), a KITTI odometry or
+        SemanticKITTI sequence (``velodyne/*.bin``), a ROS bag, a folder of frames or of
+        correspondence files.
+    layout : {"auto", "argoverse2", "sequence", "frames", "correspondences"}, default="auto"
+        What the path holds; ``"auto"``: an Argoverse 2 log or folder of logs if it
+        looks like one (``sensors/lidar``), a sequence (read by
+        :func:`mmreg.datasets.open_sequence`) if it is a KITTI sequence (``velodyne/``)
+        or a ROS bag (``.bag``, ``.db3``, ``.mcap``, a ROS 2 bag folder), else frames
+        when the files are point clouds or (n, 3) ``.npy`` arrays, else correspondence
+        files.
+    ground : {"auto", "keep", "drop"}, default="auto"
+        LiDAR logs: ``"drop"`` removes the ground points before the fit (an Argoverse 2
+        log's map rule; a log without a map fails), ``"keep"`` fits them as any other
+        point, ``"auto"`` keeps them and, when the log has a map, gives the map's ground
+        masks (``ground``, ``sweep_ground``); :func:`mmreg.runner.run_dataset` hands
+        them to an estimator whose ``fit`` names them and drops the ground rows for any
+        other (as ``"drop"``).
+    pairs : {"auto", "sweeps", "truth", "aligned"}, default="auto"
+        What a job fits. ``"sweeps"``: two raw sweeps or frames of any sizes and orders,
+        registered from the points alone by :class:`mmreg.SweepRegistration` (the
+        default for LiDAR logs), or with ``flow`` a network's flow refined on the second
+        sweep. ``"truth"``: an Argoverse 2 log's ground-truth flow as the
+        correspondences (the fit sees the answer; its summary row says so).
+        ``"aligned"``: index-aligned frames (row ``i`` of frame ``k + 1`` matches row
+        ``i`` of frame ``k``; the default for frames; on an Argoverse 2 log the same as
+        ``"truth"``). Correspondence files are their own pairs.
     capture_times : bool, default=True
-        Argoverse 2 with ``pairs="sweeps"``: hand the points' capture times (the sweep
-        files' ``offset_ns``) and the interval between the sweeps to the estimator, whose
-        ``fit`` deskews the moving objects with them (:class:`mmreg.SweepRegistration`).
-        False: register the sweeps as if every point were taken at its sweep's
-        timestamp. Ignored for the other layouts (their files carry no times).
+        Argoverse 2 sweep pairs: hand the points' capture times (``offset_ns``) and the
+        interval between the sweeps to the estimator, whose ``fit`` deskews the moving
+        objects with them (:class:`mmreg.SweepRegistration`). Ignored elsewhere.
+    flow : str or path-like, default=None
+        A folder of scene flow in the Argoverse 2 challenge's layout,
+        ``<flow>/<log>/<timestamp_ns>.feather`` (or ``<flow>/<timestamp_ns>.feather``
+        for one log) with ``flow_tx_m``, ``flow_ty_m``, ``flow_tz_m``, one row per point
+        of the sweep as the log holds it (ZeroFlow, DeFlow); each pair is then fitted as
+        ``fit([a | a + flow], sweep=next)``. Argoverse 2 only.
+    topic : str, default=None
+        A ROS bag's ``sensor_msgs/PointCloud2`` topic; needed only when the bag holds
+        several.
+    drop_ground : bool, default=None
+        Deprecated spelling of ``ground``: True is ``"drop"``, False ``"keep"``.
 
     Returns
     -------
     jobs : list
-        Of FramePairJob, SweepPairJob, CorrespondenceFileJob, Argoverse2PairJob or
-        Argoverse2SweepPairJob.
+        Of FramePairJob, SweepPairJob, CorrespondenceFileJob, Argoverse2PairJob,
+        Argoverse2SweepPairJob, SequenceSweepPairJob or (a log of a split that cannot be
+        read: one failed row) BrokenLogJob.
 
     Raises
     ------
     FileNotFoundError
-        If ``path`` does not exist (also a ValueError).
+        If ``path`` or ``flow`` does not exist (also a ValueError).
     ValueError
         If ``path`` is not a folder, holds no job, or mixes kinds of files.
 
@@ -266,34 +583,53 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned", capt
     ...     [job.name for job in dataset_jobs(folder)]
     ['frame0__frame1', 'frame1__frame2']
     """
-    allowed = ("auto", "argoverse2", "frames", "correspondences")
-    if layout not in allowed:
-        raise ValueError(f"layout must be one of {allowed}; got {layout!r}.")
-    if pairs not in PAIRS:
-        raise ValueError(f"pairs must be one of {PAIRS}; got {pairs!r}.")
+    _check_choice(layout, "layout", LAYOUTS)
+    _check_choice(pairs, "pairs", PAIRS)
+    ground = _ground_choice(ground, drop_ground)
     if not isinstance(capture_times, (bool, np.bool_)):
         raise TypeError(f"capture_times must be True or False; got {capture_times!r}.")
     capture_times = bool(capture_times)
     folder = Path(path)
     if not folder.exists():
         raise FileNotFoundError(f"{folder}: no such folder (the dataset).")
+    if layout == "sequence" or (layout == "auto" and flow is None and _is_sequence(folder)):
+        if pairs in ("truth", "aligned"):
+            raise ValueError(
+                f"{folder}: a KITTI sequence or a bag has no flow to fit on; pairs='sweeps'."
+            )
+        return _check_some(_sequence_jobs(folder, ground, capture_times, topic), folder)
+    if topic is not None:
+        raise ValueError(f"{folder}: topic= (--topic) applies to a ROS bag only.")
     if not folder.is_dir():
         raise ValueError(f"{folder}: not a folder; a dataset is a folder of files or logs.")
+    if flow is not None:
+        if not Path(flow).is_dir():
+            raise FileNotFoundError(f"{flow}: no such folder (the scene flow to refine).")
+        if pairs not in ("auto", "sweeps"):
+            raise ValueError(f"flow is refined on raw sweeps; pairs={pairs!r} takes none.")
+    truth = "truth" if pairs in ("truth", "aligned") else "sweeps"
     if layout in ("auto", "argoverse2"):
+        options = (ground, truth, capture_times, "" if flow is None else str(flow))
         if _is_argoverse2_log(folder):
-            return _check_some(_argoverse2_jobs(folder, drop_ground, pairs, capture_times), folder)
+            return _check_some(_argoverse2_jobs(folder, *options), folder)
         logs = sorted(p for p in folder.iterdir() if p.is_dir() and _is_argoverse2_log(p))
         if logs:
-            jobs = [
-                job
-                for log in logs
-                for job in _argoverse2_jobs(log, drop_ground, pairs, capture_times, f"{log.name}_")
-            ]
+            jobs = [job for log in logs for job in _argoverse2_jobs(log, *options, f"{log.name}_")]
             return _check_some(jobs, folder)
         if layout == "argoverse2":
             raise ValueError(
                 f"{folder}: not an Argoverse 2 log (no sensors/lidar) nor a folder of logs."
             )
+    if flow is not None:
+        raise ValueError(
+            f"{folder}: not an Argoverse 2 log nor a folder of logs; a flow folder "
+            "(flow=, --flow) refines the sweeps of Argoverse 2 logs."
+        )
+    if pairs == "truth":
+        raise ValueError(
+            f"{folder}: pairs='truth' fits an Argoverse 2 log's ground-truth flow; this "
+            "folder is no Argoverse 2 log."
+        )
     files = sorted(
         p
         for p in folder.iterdir()
@@ -331,7 +667,7 @@ def dataset_jobs(path, *, layout="auto", drop_ground=True, pairs="aligned", capt
     if layout == "frames":
         if len(files) < 2:
             raise ValueError(f"{folder}: one frame only; a job is a pair of consecutive frames.")
-        kind = SweepPairJob if pairs == "sweeps" else FramePairJob
+        kind = SweepPairJob if pairs == "sweeps" else FramePairJob  # auto: aligned
         return [
             kind(f"{first.stem}__{second.stem}", str(first), str(second))
             for first, second in zip(files[:-1], files[1:], strict=True)

@@ -8,17 +8,40 @@ with a summary table, one row per job (``OUT/summary.parquet`` and ``summary.csv
 
 Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas``,
 ``flow`` (the rigid flow, :attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when
-the estimator reports it) and ``meta``: a JSON string with the job's summary row and the
-fingerprint of (job, estimator) the result belongs to.
+the estimator reports it), ``indices`` and ``meta``: a JSON string with the job's summary
+row and the fingerprint of (job, estimator) the result belongs to. ``indices`` (n,) are
+the rows of the job's input the fit saw: for a LiDAR sweep pair, the rows of the first
+sweep's file (``--ground drop`` leaves the ground rows out, a bag or KITTI scan its NaN
+and all-zero rows), so ``labels[k]`` and ``flow[k]`` belong to row ``indices[k]`` of the
+sweep as the file holds it; ``arange(n)`` for frames and correspondence files. A sweep
+pair also stores ``sweep_flow`` (float32, one row per row of the file) and
+``sweep_dynamic`` (bool): the flow of every row, the rows the fit did not see (or left
+without a motion: outliers) moving with the fitted static world, and whether it moves
+0.05 m or more beyond that motion (the Argoverse 2 challenge's rule). For an Argoverse 2
+log these also go to ``OUT/av2_scene_flow/<log>/<timestamp_ns>.feather``, the scene-flow
+challenge's format (:func:`write_scene_flow`), ready for the official evaluation.
 
-A job of two raw sweeps (``dataset_jobs(..., pairs="sweeps")``) loads the first sweep
-``X`` (n, 3) and the second ``sweep`` (m, 3); it is fitted as ``fit(X, sweep=sweep)``,
-by :func:`default_sweep_estimator` unless another estimator taking ``sweep`` is given.
+A job of two sweeps (:func:`dataset_jobs`: LiDAR logs by default) loads the first sweep
+``X`` (n, 3) (or ``[a | a + flow]`` (n, 6) with a network's flow, refinement mode) and
+the second ``sweep`` (m, 3); it is fitted as ``fit(X, sweep=sweep)``, by
+:func:`default_sweep_estimator` unless another estimator taking ``sweep`` is given.
 When the job also loads the points' capture times (``times``, ``sweep_times``) and the
-``interval`` between the sweeps (Argoverse 2), they are passed too if the estimator's
-``fit`` names all three as parameters (:class:`~mmreg.SweepRegistration` deskews the
-moving objects with them); any other estimator is fitted as before. The summary's
-``capture_times`` column says whether a job's fit had them.
+``interval`` between the sweeps (Argoverse 2, bags with per-point times), they are
+passed too if the estimator's ``fit`` names all three as parameters
+(:class:`~mmreg.SweepRegistration` deskews the moving objects with them); the map's
+ground points of both sweeps (``ground``, ``sweep_ground``: boolean masks, Argoverse 2
+logs with a map, ``ground="auto"``) likewise go to a ``fit`` that names both. Any other
+estimator is fitted without the times, and without the ground rows when it cannot take
+the masks (as ``ground="drop"``). The summary's ``capture_times`` column says whether a
+job's fit had the times, ``ground`` what became of the known ground (``"masks"``,
+``"dropped"``, ``"kept"``); ``pairs`` says what it was given
+(``"sweeps"``, ``"flow"``: a network's flow, ``"truth"``: the ground-truth flow, its
+scores then measure the clustering alone, also flagged by ``truth_fed``,
+``"correspondences"``).
+
+Ctrl-C: the workers of the LocalCluster started here ignore SIGINT (a terminal sends it
+to the whole process group); the KeyboardInterrupt is this process's, which closes the
+cluster on its way out.
 """
 
 import contextlib
@@ -27,6 +50,7 @@ import inspect
 import json
 import logging
 import math
+import signal
 import sys
 import time
 import warnings
@@ -37,8 +61,10 @@ import numpy as np
 from mmreg._dataset_jobs import (
     Argoverse2PairJob,
     Argoverse2SweepPairJob,
+    BrokenLogJob,
     CorrespondenceFileJob,
     FramePairJob,
+    SequenceSweepPairJob,
     SweepPairJob,
     check_jobs,
     dataset_jobs,
@@ -47,18 +73,25 @@ from mmreg._dataset_jobs import (
 __all__ = [
     "Argoverse2PairJob",
     "Argoverse2SweepPairJob",
+    "BrokenLogJob",
     "CorrespondenceFileJob",
     "FramePairJob",
+    "SequenceSweepPairJob",
     "SweepPairJob",
     "dataset_jobs",
     "default_estimator",
     "default_sweep_estimator",
     "read_job_result",
     "run_dataset",
+    "sweep_flow",
+    "write_scene_flow",
 ]
 
 JOBS_FOLDER = "jobs"
-RESULT_KEYS = ("labels", "rotations", "translations", "sigmas", "flow", "meta")
+RESULT_KEYS = ("labels", "rotations", "translations", "sigmas", "flow", "indices", "meta")
+# Where the flow of every sweep goes in the Argoverse 2 scene-flow challenge's layout.
+SCENE_FLOW_FOLDER = "av2_scene_flow"
+SCENE_FLOW_COLUMNS = ("flow_tx_m", "flow_ty_m", "flow_tz_m")
 # The columns every summary starts with; metrics and estimator-specific numbers follow.
 SUMMARY_COLUMNS = [
     "job",
@@ -91,10 +124,14 @@ def default_sweep_estimator():
 
 
 # Jobs whose load() gives a second sweep to fit on (fit(X, sweep=...)).
-_SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob)
+_SWEEP_JOBS = (SweepPairJob, Argoverse2SweepPairJob, SequenceSweepPairJob)
 # What a job of two sweeps may add for fit: the capture times of both sweeps' points and
 # the seconds between the sweeps' reference times (SweepRegistration.fit's names).
 _TIMING = ("times", "sweep_times", "interval")
+# The known ground points of both sweeps (boolean masks), for a fit that names them.
+_GROUND = ("ground", "sweep_ground")
+# The Argoverse 2 challenge's dynamic threshold: metres of flow beyond the ego flow.
+DYNAMIC_THRESHOLD = 0.05
 
 
 def _fit_parameters(estimator):
@@ -114,6 +151,12 @@ def _fit_parameters(estimator):
 def _takes_sweep(estimator):
     names = _fit_parameters(estimator)
     return names is None or "sweep" in names  # no signature to read: let fit decide
+
+
+def _takes_ground(estimator):
+    # The map's ground masks, as the times: only to a fit that names both.
+    names = _fit_parameters(estimator)
+    return names is not None and set(_GROUND) <= names
 
 
 def _takes_times(estimator):
@@ -182,6 +225,62 @@ def _metrics(X, estimator, data):
     return scores
 
 
+def _static_motion(model):
+    """Rotation and translation of the fitted static world (the largest cluster if unnamed).
+
+    No cluster at all: the identity (every point stays where it is).
+    """
+    if len(model.rotations_) == 0:
+        return np.eye(3), np.zeros(3)
+    static = getattr(model, "static_cluster_", None)
+    if static is None or static < 0:
+        labels = np.asarray(model.labels_)
+        counts = np.bincount(labels[labels >= 0], minlength=len(model.rotations_))
+        static = int(np.argmax(counts)) if counts.size else 0
+    return np.asarray(model.rotations_)[static], np.asarray(model.translations_)[static]
+
+
+def sweep_flow(points, indices, flow, rotation, translation):
+    """The flow of every row of a sweep from a fit on the rows ``indices``.
+
+    Rows the fit did not see (dropped ground) and rows it left without a motion (NaN
+    flow: outliers) move with the static world, ``R p + t - p``. ``is_dynamic``: the
+    flow differs from that by at least 0.05 m, the Argoverse 2 challenge's rule.
+    """
+    ego = points @ np.asarray(rotation).T + translation - points
+    out = ego.copy()
+    fitted = np.asarray(flow)[:, :3]
+    out[indices] = np.where(np.isfinite(fitted), fitted, ego[indices])
+    dynamic = np.linalg.norm(out - ego, axis=1) >= DYNAMIC_THRESHOLD
+    return out, dynamic
+
+
+def _known_ground(data, model):
+    """The job's data for ``model`` and what became of the ground points it knows.
+
+    ``"masks"``: the map's ground masks go to a ``fit`` that names them; ``"dropped"``:
+    the ground rows were removed, by the job (``ground="drop"``) or here, for a ``fit``
+    that takes no masks (on the real Argoverse 2 pair ``av2_api_7fab2350`` the default
+    SweepRegistration found 1 of 21 moving objects with the ground kept, 5 without);
+    ``"kept"``: fitted as ordinary points (``ground="keep"``, or no map); None: a job
+    without ground (frames, correspondences).
+    """
+    rule = data.get("ground_rule")
+    if any(data.get(key) is None for key in _GROUND):
+        return data, rule
+    if _takes_ground(model):
+        return data, "masks"
+    keep, keep_sweep = ~np.asarray(data["ground"]), ~np.asarray(data["sweep_ground"])
+    out = {key: value for key, value in data.items() if key not in _GROUND}
+    for key in ("X", "indices", "times", "labels_true", "flow_true"):
+        if out.get(key) is not None:
+            out[key] = np.asarray(out[key])[keep]
+    for key in ("sweep", "sweep_times"):
+        if out.get(key) is not None:
+            out[key] = np.asarray(out[key])[keep_sweep]
+    return out, "dropped"
+
+
 def _process(job, estimator):
     """Load and fit one job (runs on a worker); ``(name, arrays or None, row)``.
 
@@ -194,13 +293,16 @@ def _process(job, estimator):
     try:
         start = time.perf_counter()
         data = job.load()
+        model = clone(estimator)
+        data, row["ground"] = _known_ground(data, model)
         X = np.asarray(data["X"], dtype=float)
         row["n"] = len(X)
         sweep = data.get("sweep")
         if sweep is not None:
             row["n_sweep"] = len(sweep)
+        row["pairs"] = data.get("pairs", "sweeps" if sweep is not None else "correspondences")
+        row["truth_fed"] = row["pairs"] == "truth"
         row["load_s"] = time.perf_counter() - start
-        model = clone(estimator)
         params = {} if sweep is None else {"sweep": sweep}
         timed = (
             sweep is not None
@@ -210,6 +312,8 @@ def _process(job, estimator):
         if timed:
             params.update({key: data[key] for key in _TIMING})
         row["capture_times"] = timed
+        if row["ground"] == "masks":
+            params.update({key: data[key] for key in _GROUND})
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -226,18 +330,28 @@ def _process(job, estimator):
             warnings=" | ".join(sorted({str(w.message) for w in caught}))[:500],
         )
         row.update(_metrics(X, model, data))
+        indices = data.get("indices")
+        indices = np.arange(len(X)) if indices is None else np.asarray(indices, dtype=np.int64)
+        arrays = {
+            "labels": model.labels_.astype(np.int64),
+            "rotations": np.asarray(model.rotations_, dtype=float),
+            "translations": np.asarray(model.translations_, dtype=float),
+            "sigmas": np.asarray(model.sigmas_, dtype=float),
+            "flow": np.asarray(model.flow_, dtype=float),
+            "indices": indices,
+        }
+        if moving is not None:
+            arrays["moving"] = np.asarray(moving, dtype=bool)
+        points = data.get("sweep_points")
+        if points is not None:
+            row["n_file"] = len(points)
+            flow, dynamic = sweep_flow(
+                np.asarray(points, float), indices, model.flow_, *_static_motion(model)
+            )
+            arrays["sweep_flow"], arrays["sweep_dynamic"] = flow.astype(np.float32), dynamic
     except Exception as error:  # one job's failure is its row, not the run's end
         row["error"] = f"{type(error).__name__}: {' '.join(str(error).split())}"[:1000]
         return job.name, None, row
-    arrays = {
-        "labels": model.labels_.astype(np.int64),
-        "rotations": np.asarray(model.rotations_, dtype=float),
-        "translations": np.asarray(model.translations_, dtype=float),
-        "sigmas": np.asarray(model.sigmas_, dtype=float),
-        "flow": np.asarray(model.flow_, dtype=float),
-    }
-    if moving is not None:
-        arrays["moving"] = np.asarray(moving, dtype=bool)
     return job.name, arrays, row
 
 
@@ -285,6 +399,62 @@ def _write_result(path, arrays, row, fingerprint):
         np.savez(handle, **arrays, meta=np.array(meta))
 
 
+def write_scene_flow(path, flow, is_dynamic):
+    """Write one sweep's flow as the Argoverse 2 scene-flow challenge's feather file.
+
+    Columns ``flow_tx_m``, ``flow_ty_m``, ``flow_tz_m`` (float32, metres, in the first
+    sweep's ego frame) and ``is_dynamic`` (bool), one row per point of the sweep in the
+    order of its file: the format of ``av2/evaluation/scene_flow/SUBMISSION_FORMAT.md``
+    and ``write_output_file`` in ``av2/evaluation/scene_flow/utils.py`` of
+    https://github.com/argoverse/av2-api (which store float16 and, for a submission,
+    only the rows of the evaluation mask: ``make_submission_archive.py`` selects and
+    casts them); the file is written whole or not at all.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ``<folder>/<log_id>/<timestamp_ns>.feather`` (its folder is created).
+    flow : array-like of shape (n, 3)
+        The flow of every point.
+    is_dynamic : array-like of shape (n,) of bool
+        Whether each point moves beyond the static world's motion.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> import pandas as pd
+    >>> from mmreg.runner import write_scene_flow
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = Path(folder) / "log" / "100.feather"
+    ...     write_scene_flow(path, np.ones((2, 3)), np.array([True, False]))
+    ...     pd.read_feather(path).to_dict("list")  # doctest: +NORMALIZE_WHITESPACE
+    {'flow_tx_m': [1.0, 1.0], 'flow_ty_m': [1.0, 1.0], 'flow_tz_m': [1.0, 1.0],
+     'is_dynamic': [True, False]}
+    """
+    import pyarrow as pa
+    import pyarrow.feather as feather
+
+    from mmreg import io as mmio
+
+    flow = np.asarray(flow, dtype=np.float32).reshape(-1, 3)
+    columns = {name: flow[:, k] for k, name in enumerate(SCENE_FLOW_COLUMNS)}
+    columns["is_dynamic"] = np.asarray(is_dynamic, dtype=bool).reshape(len(flow))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with mmio.atomic_write(path) as handle:
+        feather.write_feather(pa.table(columns), handle, compression="uncompressed")
+
+
+def _write_sweep_flow(out, job, arrays):
+    """The challenge's file of a job of a log (``job.challenge``), from its result."""
+    relative = getattr(job, "challenge", "")
+    if relative and "sweep_flow" in arrays:
+        path = Path(out) / SCENE_FLOW_FOLDER / relative
+        write_scene_flow(path, arrays["sweep_flow"], arrays["sweep_dynamic"])
+
+
 def _json_value(value):
     if isinstance(value, np.generic):
         return value.item()
@@ -304,19 +474,43 @@ def _dask_backend(scheduler, n_workers):
         if scheduler is None:
             # One thread per worker: the fits use numpy/scipy, which hold the GIL between
             # the vectorised calls, so processes (not threads) run jobs side by side.
-            cluster = stack.enter_context(
-                LocalCluster(
-                    n_workers=n_workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=":0",  # a free port: other clusters may run here
-                    silence_logs=logging.CRITICAL,  # a lost worker is a row, not a log
+            with _children_ignore_ctrl_c():
+                cluster = stack.enter_context(
+                    LocalCluster(
+                        n_workers=n_workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=":0",  # a free port: other clusters may run here
+                        silence_logs=logging.CRITICAL,  # a lost worker is a row, not a log
+                    )
                 )
-            )
             scheduler = cluster
         stack.enter_context(Client(scheduler))
         stack.enter_context(joblib.parallel_config(backend="dask"))
         yield
+
+
+@contextlib.contextmanager
+def _children_ignore_ctrl_c():
+    """Start processes that ignore SIGINT: Ctrl-C is this process's to handle.
+
+    A terminal sends Ctrl-C's SIGINT to the whole foreground process group, the Dask
+    worker processes included: each printed a traceback, and the workers killed in their
+    start left semaphores the resource tracker warned of. A process started while
+    SIGINT is ignored keeps ignoring it (the disposition survives fork and exec, and
+    Python leaves an inherited SIG_IGN alone), so the workers leave the interruption to
+    this process, which closes the cluster (and with it the workers). A Ctrl-C during
+    the cluster's start (a second or two) is lost.
+    """
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are not ours to handle
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _write_table(frame, out):
@@ -358,8 +552,14 @@ def run_dataset(
         ``"sweep"`` (m, 3) for a job of two raw sweeps (then ``X`` may be (n, 3): the
         first sweep; see ``pairs`` of :func:`dataset_jobs`), with ``"times"`` (n,),
         ``"sweep_times"`` (m,) and ``"interval"`` (seconds) when the points' capture
-        times are known: these go to ``fit`` when it names all three as parameters. The
-        jobs are pickled to the workers, which must be able to read the files they name.
+        times are known: these go to ``fit`` when it names all three as parameters;
+        ``"ground"`` (n,) and ``"sweep_ground"`` (m,) (known ground points, to a ``fit``
+        naming both); ``"indices"`` (n,) (the rows of the input ``X`` holds; default
+        ``arange(n)``), ``"sweep_points"`` (every row of the first sweep's file: then
+        ``sweep_flow`` is stored) and ``"pairs"`` (what ``X`` is). A job with a
+        ``challenge`` attribute (``"<log>/<timestamp_ns>.feather"``) also writes its
+        sweep's flow in the Argoverse 2 challenge's format. The jobs are pickled to the
+        workers, which must be able to read the files they name.
     estimator : estimator, default=None
         A scikit-learn style estimator (``fit(X)``, ``labels_``, ``rotations_``,
         ``translations_``, ``sigmas_``, ``flow_``); None: :func:`default_estimator`, or
@@ -394,7 +594,12 @@ def run_dataset(
         scene_flow_metrics`), ``epe_static`` and ``epe_moving`` (the mean EPE on the
         largest object's points and on the others'). Points with a negative true label
         are not scored. ``capture_times``: whether ``fit`` was given the points' capture
-        times.
+        times; ``ground``: whether the map's ground masks were handed to ``fit``
+        (``"masks"``), the ground rows dropped (``"dropped"``: ``ground="drop"``, or
+        ``"auto"`` with a ``fit`` that takes no masks) or kept (``"kept"``); ``pairs``: what it was
+        fitted on (``"sweeps"``, ``"flow"``, ``"truth"``, ``"correspondences"``) and
+        ``truth_fed``: whether that was the ground-truth flow; ``n_file``: rows of the
+        first sweep's file.
 
     Examples
     --------
@@ -448,6 +653,9 @@ def run_dataset(
             todo.append(job)
         else:
             rows[job.name] = found[1] | {"resumed": True}
+            relative = getattr(job, "challenge", "")
+            if relative and not (out / SCENE_FLOW_FOLDER / relative).is_file():
+                _write_sweep_flow(out, job, found[0])
     bar = tqdm(
         total=len(jobs),
         initial=len(rows),
@@ -459,11 +667,13 @@ def run_dataset(
     with bar:
         if todo:
             with _dask_backend(scheduler, n_workers):
+                by_name = {job.name: job for job in todo}
                 tasks = (joblib.delayed(_process)(job, estimator) for job in todo)
                 parallel = joblib.Parallel(n_jobs=-1, return_as="generator_unordered")
                 for name, arrays, row in parallel(tasks):
                     if arrays is not None:
                         _write_result(_result_path(out, name), arrays, row, fingerprints[name])
+                        _write_sweep_flow(out, by_name[name], arrays)
                     rows[name] = row | {"resumed": False}
                     bar.update(1)
     frame = pd.DataFrame([rows[job.name] for job in jobs])

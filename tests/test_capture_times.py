@@ -151,14 +151,14 @@ def _run(jobs, estimator, out, scheduler):
 
 
 def test_the_runner_hands_the_capture_times_to_fit(log, pair, scheduler, tmp_path):
-    jobs = dataset_jobs(log, pairs="sweeps")
+    jobs = dataset_jobs(log, pairs="sweeps", ground="drop")
     assert len(jobs) == 1
     data = jobs[0].load()
     for key, value in [("times", pair.times), ("sweep_times", pair.sweep2_times)]:
         np.testing.assert_array_equal(data[key], value)
     assert data["interval"] == pytest.approx(INTERVAL)
     timed, timed_row = _run(jobs, _estimator(), tmp_path / "timed", scheduler)
-    untimed = dataset_jobs(log, pairs="sweeps", capture_times=False)
+    untimed = dataset_jobs(log, pairs="sweeps", ground="drop", capture_times=False)
     assert "times" not in untimed[0].load()
     skewed, skewed_row = _run(untimed, _estimator(), tmp_path / "skewed", scheduler)
     assert timed_row["capture_times"] and not skewed_row["capture_times"]
@@ -188,14 +188,14 @@ def test_the_runner_hands_the_capture_times_to_fit(log, pair, scheduler, tmp_pat
 def test_all_zero_offsets_are_no_times(tmp_path):
     # write_argoverse2_log's default, and logs without capture times: nothing to deskew.
     log = write_skewed_log(tmp_path / "log", zero_offsets=True)
-    data = dataset_jobs(log, pairs="sweeps")[0].load()
+    data = dataset_jobs(log, pairs="sweeps", ground="drop")[0].load()
     assert not {"times", "sweep_times", "interval"} & set(data)
     with pytest.raises(TypeError, match="capture_times must be True or False"):
-        dataset_jobs(log, pairs="sweeps", capture_times="no")
+        dataset_jobs(log, pairs="sweeps", ground="drop", capture_times="no")
 
 
 def test_mmreg_run_passes_the_times_unless_told_not_to(log, scheduler, tmp_path, capsys):
-    common = ["run", str(log), "--pairs", "sweeps", "--scheduler", scheduler, "-q"]
+    common = ["run", str(log), "--ground", "drop", "--scheduler", scheduler, "-q"]
     assert main([*common, "--out", str(tmp_path / "with")]) == 0
     assert main([*common, "--out", str(tmp_path / "without"), "--no-capture-times"]) == 0
     with_times = pd.read_csv(tmp_path / "with" / "summary.csv")

@@ -175,9 +175,10 @@ def _write_log(folder):
 
 def test_argoverse2_log_scored_against_the_truth(tmp_path, scheduler):
     log = _write_log(tmp_path / "log")
-    jobs = dataset_jobs(log)
-    assert len(jobs) == 2 and all(job.drop_ground for job in jobs)
-    summary = run_dataset(log, None, tmp_path / "out", scheduler=scheduler, progress=False)
+    jobs = dataset_jobs(log, pairs="truth", ground="drop")
+    assert len(jobs) == 2 and all(job.ground == "drop" for job in jobs)
+    summary = run_dataset(jobs, None, tmp_path / "out", scheduler=scheduler, progress=False)
+    assert summary["pairs"].tolist() == ["truth", "truth"] and summary["truth_fed"].all()
     assert (summary["status"] == "done").all() and len(summary) == 2
     for job, (_, row) in zip(jobs, summary.iterrows(), strict=True):
         scene = load_argoverse2(log, job.index, drop_ground=True)
@@ -334,11 +335,12 @@ def _write_sweep_log(folder):
 def test_argoverse2_log_from_the_two_sweeps(tmp_path, scheduler, capsys):
     log = _write_sweep_log(tmp_path / "log")
     out = tmp_path / "out"
-    command = ["run", str(log), "--pairs", "sweeps", "--out", str(out), "--scheduler", scheduler]
+    command = ["run", str(log), "--ground", "drop", "--out", str(out), "--scheduler", scheduler]
     assert main([*command, "-q"]) == 0
     summary = pd.read_csv(out / "summary.csv")
-    jobs = dataset_jobs(log, pairs="sweeps")
-    assert len(dataset_jobs(log)) == 3 and len(jobs) == 2
+    jobs = dataset_jobs(log, ground="drop")
+    # Three sweeps, two pairs (the annotation past the last sweep pairs no sweep).
+    assert len(jobs) == 2 and len(dataset_jobs(log, pairs="truth")) == 2
     assert summary["job"].astype(str).tolist() == [job.name for job in jobs]
     assert summary["n"].tolist() == [400, 410] and summary["n_sweep"].tolist() == [410, 390]
     for job, (_, row) in zip(jobs, summary.iterrows(), strict=True):
@@ -348,7 +350,14 @@ def test_argoverse2_log_from_the_two_sweeps(tmp_path, scheduler, capsys):
         arrays, _ = read_job_result(out / "jobs" / f"{job.name}.npz")
         np.testing.assert_array_equal(arrays["labels"], expected.labels_)
         assert arrays["flow"].shape == (row["n"], 3)
+        # The rows of the sweep's file it fitted: those off the road (the first 200 or
+        # 180 rows of the file are the road, z = 0).
+        scene = load_argoverse2(log, job.index)
+        np.testing.assert_array_equal(arrays["indices"], np.flatnonzero(~scene.ground))
+        assert arrays["indices"][0] == len(scene.a) - row["n"]
+        assert row["pairs"] == "sweeps" and not row["truth_fed"]
         # Scored against the true flow of the first sweep: the building and the car found.
         assert row["n_clusters"] == 2 and row["n_moving"] == 1
         assert row["iou"] == 1.0 and row["moving_found"] == 1.0 and row["epe3d"] < 0.1
-    assert json.loads((out / "run.json").read_text())["configuration"]["pairs"] == "sweeps"
+    configuration = json.loads((out / "run.json").read_text())["configuration"]
+    assert configuration["pairs"] == "auto" and configuration["ground"] == "drop"

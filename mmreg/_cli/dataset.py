@@ -1,7 +1,10 @@
 """``mmreg run``: process a whole dataset as independent jobs on Dask (resumable)."""
 
+import contextlib
+import hashlib
 import importlib.util
 import json
+import os
 import shutil
 import sys
 import time
@@ -13,39 +16,64 @@ from mmreg._cli.register import TAU_RULE, _positive_int, _seed, _tau, resolve_ta
 NAME = "run"
 HELP = "process a dataset (a folder of frames or files, Argoverse 2 logs) on Dask"
 DESCRIPTION = """\
-Run MultiModelRegistration on every job of DATASET, as independent tasks on a Dask
-cluster: a LocalCluster on this machine by default, or the one at --scheduler.
+Run the registration on every job of DATASET, as independent tasks on a Dask cluster: a
+LocalCluster on this machine by default, or the one at --scheduler.
 
 DATASET is one of
-  - an Argoverse 2 sensor log (a folder with sensors/lidar, annotations.feather, ...), or
-    a folder of such logs: one job per consecutive sweep pair, the ground-truth flow as
-    the correspondences (ground removed unless --keep-ground), scored against the truth;
+  - an Argoverse 2 log (a folder with sensors/lidar; annotations.feather, the ego poses
+    and map/ are used when there: the test split and the LiDAR dataset have no
+    annotations), or a folder of logs (a split): one job per consecutive sweep pair (N
+    sweeps, N-1 jobs), scored against the truth where the log has annotations. A log
+    of a split that cannot be read is a failed row; the others go on;
+  - a KITTI odometry or SemanticKITTI sequence (a folder with velodyne/*.bin), or a ROS
+    bag (.bag, a ROS 2 bag folder, .db3, .mcap; --topic picks its PointCloud2 topic when
+    it has several): one job per consecutive frame pair (rows that are NaN or all zero,
+    no return, are left out);
   - a folder of frames (*.ply, *.pcd, *.xyz or (n, 3) *.npy, in name order): one job per
     consecutive pair, frame k+1 giving the b-point of every row of frame k (index-aligned
-    clouds);
+    clouds), or with --pairs sweeps two raw sweeps;
   - a folder of correspondence files ((n, 6) *.npy, *.npz, *.csv, *.txt): one job per
     file; an .npz may hold the truth too ('labels', 'flow'), then scored.
 
---pairs says what a pair of consecutive frames or sweeps is:
-  - aligned (default): correspondences; frames must be index-aligned (same size, row i
-    of frame k+1 matches row i of frame k); Argoverse 2: the ground-truth flow gives
-    every point's match;
-  - sweeps: two raw sweeps of any sizes and orders (real LiDAR frames), registered from
-    the points alone: sweep k to sweep k+1 by SweepRegistration (ego motion and object
-    motions by ICP, clusters by the --method variant). Argoverse 2 jobs are still scored
-    against the ground-truth flow of sweep k. Not for correspondence files.
+--pairs says what a job fits:
+  - auto (default): sweeps for LiDAR logs, aligned for frames;
+  - sweeps: two raw sweeps of any sizes and orders, registered from the points alone:
+    sweep k to sweep k+1 by SweepRegistration (ego motion and object motions by ICP,
+    clusters by the --method variant);
+  - truth: an Argoverse 2 log's ground-truth flow as the correspondences. The fit sees
+    the answer: its scores measure the clustering, not the flow; the summary's pairs
+    column says 'truth' and the printed line says how many jobs were fed the truth;
+  - aligned: index-aligned frames (row i of frame k+1 matches row i of frame k); on an
+    Argoverse 2 log the same as truth.
 
-Capture times: with --pairs sweeps, an Argoverse 2 job hands the capture time of every
-point (the sweep files' offset_ns, seconds after each sweep's timestamp) and the time
-between the two sweeps to SweepRegistration, which moves each moving object's points back
-to where the object was at its sweep's timestamp inside the ICP (deskewing: the two LiDAR
-heads see a car about 50 ms apart, two copies of it within one sweep). Sweeps whose
-offsets are all zero are registered without; --no-capture-times turns it off. The
-summary's capture_times column says which jobs had them. Frames carry no times.
+--flow DIR refines a network's scene flow (ZeroFlow, DeFlow, an Argoverse 2 challenge
+entry) on the second sweep: DIR/<log>/<timestamp_ns>.feather (or DIR/<timestamp_ns>.feather
+for one log) with flow_tx_m, flow_ty_m, flow_tz_m, one row per point of the sweep as the
+log holds it; each pair is fitted as SweepRegistration.fit([a | a + flow], sweep=next).
+
+--ground says what becomes of the ground points of LiDAR logs:
+  - auto (default): where the log has a map (Argoverse 2 logs with map/), the map's
+    ground points go to the estimator when its fit takes them ('ground', 'sweep_ground'),
+    else they are dropped as with drop; without a map they are kept;
+  - keep: registered as ordinary points;
+  - drop: removed before the fit, by the map's rule (a log without a map fails).
+
+Capture times: an Argoverse 2 sweep pair (or a bag's, with a per-point time field) hands
+the capture time of every point (the sweep files' offset_ns, seconds after each sweep's
+timestamp) and the time between the two sweeps to SweepRegistration, which moves each
+moving object's points back to where the object was at its sweep's timestamp inside the
+ICP (deskewing). Sweeps whose offsets are all zero are registered without;
+--no-capture-times turns it off. The summary's capture_times column says which jobs had
+them, its ground column what became of the ground (masks, dropped, kept).
 
 Written into --out: jobs/<job>.npz per job (labels, rotations, translations, sigmas,
-flow, moving, meta), each whole or not at all; summary.parquet and summary.csv (one row
-per job: sizes, clusters, timings, status, and the scores when the truth is known); and
+flow, moving, indices: the rows of the first sweep's file the job fitted, so that
+labels[k] and flow[k] belong to row indices[k]; meta), each whole or not at all;
+av2_scene_flow/<log>/<timestamp_ns>.feather per Argoverse 2 job: the flow of every point
+of the sweep in the scene-flow challenge's format (flow_tx_m, flow_ty_m, flow_tz_m,
+is_dynamic; dropped ground and outliers move with the static world), ready for the
+official evaluation; summary.parquet and summary.csv (one row per job: sizes, clusters,
+timings, status, what it was fitted on, and the scores when the truth is known); and
 run.json (the dataset and the options).
 
 Run the same command again after an interruption (Ctrl-C, a crash, a lost worker): jobs
@@ -61,29 +89,34 @@ path (a shared file system); the results come back to this machine.
 """
 EPILOG = """\
 examples:
-  mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --out val-0c6e
+  mmreg run /data/av2/sensor/test/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --out test-0c6e
+  mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val
+  mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --flow zeroflow/val
+  mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs truth
+  mmreg run /data/kitti/odometry/sequences/08 --out kitti-08
+  mmreg run drive.bag --topic /velodyne_points --out drive
   mmreg run frames/ --out result --method robust --tau 1.5
   mmreg run lidar_frames/ --pairs sweeps --out result
-  mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs sweeps
-  mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs sweeps \
-      --no-capture-times --out without-times
-  mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val
 """
 
 METHODS = ("sweep", "robust", "paper")
-LAYOUTS = ("auto", "argoverse2", "frames", "correspondences")
-PAIRS = ("aligned", "sweeps")
+LAYOUTS = ("auto", "argoverse2", "sequence", "frames", "correspondences")
+PAIRS = ("auto", "sweeps", "truth", "aligned")
+GROUND = ("auto", "keep", "drop")
 # What an 'mmreg run' folder holds at its top (jobs/ holds <job>.npz files).
-RUN_FILES = ("run.json", "summary.parquet", "summary.csv", "jobs")
+RUN_FILES = ("run.json", "summary.parquet", "summary.csv", "jobs", "av2_scene_flow")
 
 
 def add_arguments(parser):
-    parser.add_argument("dataset", metavar="DATASET", help="a dataset folder (see above)")
+    parser.add_argument(
+        "dataset", metavar="DATASET", help="a dataset folder or a ROS bag (see above)"
+    )
     parser.add_argument(
         "--out",
         metavar="DIR",
         default=None,
-        help="results folder (default: DATASET's name + '-mmreg-run', in the current directory)",
+        help="results folder (default: DATASET's name + '-mmreg-run-' + 8 hex digits of "
+        "its full path, in the current directory)",
     )
     parser.add_argument(
         "--scheduler",
@@ -117,20 +150,46 @@ def add_arguments(parser):
     parser.add_argument(
         "--pairs",
         choices=PAIRS,
-        default="aligned",
-        help="what consecutive frames or sweeps are: 'aligned' correspondences (default; "
-        "Argoverse 2: matched by the true flow) or raw 'sweeps' of any sizes and orders, "
-        "registered from the points alone (see above)",
+        default="auto",
+        help="what a job fits: 'sweeps', two raw sweeps (LiDAR logs' default); 'truth', "
+        "an Argoverse 2 log's ground-truth flow (the fit sees the answer); 'aligned' frames "
+        "(frames' default); see above",
     )
     parser.add_argument(
-        "--keep-ground", action="store_true", help="Argoverse 2: keep the ground points"
+        "--flow",
+        metavar="DIR",
+        default=None,
+        help="Argoverse 2: refine this scene flow (DIR/<log>/<timestamp_ns>.feather, "
+        "challenge layout) on the second sweep (see above)",
+    )
+    parser.add_argument(
+        "--topic",
+        metavar="TOPIC",
+        default=None,
+        help="a ROS bag's PointCloud2 topic (needed only when the bag has several)",
+    )
+    parser.add_argument(
+        "--ground",
+        choices=GROUND,
+        default="auto",
+        help="LiDAR logs' ground points: 'auto' hands the map's ground to an estimator "
+        "that takes it (else as drop; no map: as keep), 'keep' registers them as any "
+        "point, 'drop' removes them (map rule)",
+    )
+    parser.add_argument(
+        "--keep-ground",
+        dest="ground",
+        action="store_const",
+        const="keep",
+        help="deprecated: the same as --ground keep",
     )
     parser.add_argument(
         "--no-capture-times",
         dest="capture_times",
         action="store_false",
-        help="Argoverse 2 with --pairs sweeps: do not deskew the moving objects by the "
-        "points' capture times (offset_ns); register as if each sweep were taken at once",
+        help="sweep pairs (Argoverse 2, bags with per-point times): do not deskew the "
+        "moving objects by the points' capture times; register as if each sweep were "
+        "taken at once",
     )
     parser.add_argument(
         "--overwrite",
@@ -148,7 +207,9 @@ def _configuration(args):
         "dataset": str(Path(args.dataset).resolve()),
         "layout": args.layout,
         "pairs": args.pairs,
-        "drop_ground": not args.keep_ground,
+        "ground": args.ground,
+        "topic": args.topic,
+        "flow": None if args.flow is None else str(Path(args.flow).resolve()),
         "capture_times": args.capture_times,
         "method": args.method,
         "tau": args.tau,
@@ -203,19 +264,38 @@ def check_run_out(out, configuration, *, overwrite):
     return True
 
 
-def _estimator(args):
+def _estimator(args, jobs):
     from mmreg import MultiModelRegistration, SweepRegistration
+    from mmreg.runner import _SWEEP_JOBS
 
     estimator = MultiModelRegistration(
         variant=args.method, tau=args.tau, max_iter=args.max_iter, random_state=args.seed
     )
-    if args.pairs == "sweeps":
+    if any(isinstance(job, _SWEEP_JOBS) for job in jobs):
         estimator = SweepRegistration(estimator, random_state=args.seed)
     return estimator
 
 
+@contextlib.contextmanager
+def _missing_reader():
+    """A reader's missing package (rosbags for a bag) is one line naming the install."""
+    try:
+        yield
+    except ImportError as error:
+        raise CLIError(one_line(error)) from None
+
+
+def default_out(args):
+    """``<DATASET's name>-mmreg-run-<8 hex digits of its full path>``: never shared."""
+    path = str(Path(args.dataset).resolve())
+    digest = hashlib.sha256(path.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+    name = Path(os.path.abspath(args.dataset)).name or Path(path).name  # as the user has it
+    return f"{name}-mmreg-run-{digest}"
+
+
 def run(args):
     from mmreg import io as mmio
+    from mmreg._dataset_jobs import SequenceSweepPairJob
     from mmreg.runner import (
         Argoverse2PairJob,
         Argoverse2SweepPairJob,
@@ -226,25 +306,30 @@ def run(args):
     if importlib.util.find_spec("distributed") is None:
         raise CLIError("'mmreg run' needs dask.distributed: pip install 'mmreg[dask]'")
     if args.out is None:
-        args.out = f"{Path(args.dataset).resolve().name}-mmreg-run"
+        args.out = default_out(args)
     out = Path(args.out)
-    with reading(args.dataset):  # a listing of the dataset: no job is loaded yet
+    with reading(args.dataset), _missing_reader():  # a listing: no job is loaded yet
         jobs = dataset_jobs(
             args.dataset,
             layout=args.layout,
-            drop_ground=not args.keep_ground,
+            ground=args.ground,
             pairs=args.pairs,
             capture_times=args.capture_times,
+            flow=args.flow,
+            topic=args.topic,
         )
     lidar = args.pairs == "sweeps" or any(
-        isinstance(job, (Argoverse2PairJob, Argoverse2SweepPairJob)) for job in jobs
+        isinstance(job, (Argoverse2PairJob, Argoverse2SweepPairJob, SequenceSweepPairJob))
+        for job in jobs
     )
     args.tau = resolve_tau(args.tau, lidar)
     configuration = _configuration(args)
     resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
     try:
-        if args.overwrite and (out / "jobs").is_dir():
-            shutil.rmtree(out / "jobs")  # only result files, checked above
+        if args.overwrite:  # only result files, checked above
+            for folder in ("jobs", "av2_scene_flow"):
+                if (out / folder).is_dir():
+                    shutil.rmtree(out / folder)
         out.mkdir(parents=True, exist_ok=True)
         record = {"configuration": configuration, "jobs": len(jobs)}
         with mmio.atomic_write(out / "run.json", "w") as handle:
@@ -254,7 +339,7 @@ def run(args):
     start = time.perf_counter()
     summary = run_dataset(
         jobs,
-        _estimator(args),
+        _estimator(args, jobs),
         out,
         scheduler=args.scheduler,
         n_workers=args.n_workers,
@@ -269,12 +354,19 @@ def run(args):
             + (f" ({resumed:,} from an earlier run)" if resuming and resumed else "")
             + f", {len(failed):,} failed, {elapsed:.1f} s"
         )
+        fed = int(summary["pairs"].eq("truth").sum()) if "pairs" in summary else 0
+        if fed:
+            print(
+                f"{plural(fed, 'job')} fitted on the ground-truth flow (--pairs truth): the "
+                "fit saw the answer; its scores measure the clustering, not the flow"
+            )
         scores = ("iou", "moving_found", "epe3d", "epe_moving", "epe_static")
         scores = [c for c in scores if c in summary]
         if scores:
             means = summary[scores].mean(numeric_only=True)
             print("mean " + ", ".join(f"{name} {value:.3f}" for name, value in means.items()))
-        print(f"written: {out}/ (jobs/, summary.parquet, summary.csv, run.json)")
+        flows = ", av2_scene_flow/" if (out / "av2_scene_flow").is_dir() else ""
+        print(f"written: {out}/ (jobs/{flows}, summary.parquet, summary.csv, run.json)")
     if len(failed):
         first = failed.iloc[0]
         print(
