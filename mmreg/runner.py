@@ -268,7 +268,7 @@ def _known_ground(data, model):
     rule = data.get("ground_rule")
     if any(data.get(key) is None for key in _GROUND):
         return data, rule
-    if _takes_ground(model):
+    if _takes_ground(model) and np.shape(data["X"])[1] == 3:  # masks go with raw sweeps
         return data, "masks"
     keep, keep_sweep = ~np.asarray(data["ground"]), ~np.asarray(data["sweep_ground"])
     out = {key: value for key, value in data.items() if key not in _GROUND}

@@ -225,15 +225,25 @@ def test_map_ground_masks_go_to_a_fit_that_names_them(tmp_path):
     np.testing.assert_array_equal(seen["ground"], scene.ground)
     np.testing.assert_array_equal(seen["sweep_ground"], scene.sweep2_ground)
     assert seen["ground"][: SIZES[0][0]].all() and not seen["ground"][SIZES[0][0] :].any()
+
     # A fit that does not name them gets none: the map's ground rows are dropped, the
     # same fit as --ground drop. "keep" jobs keep them and pass no mask.
-    _, plain_arrays, plain = _process(job, _cli_estimator())
+    class Unaware(SweepRegistration):
+        def fit(self, X, y=None, *, sweep=None):
+            return super().fit(X, sweep=sweep)
+
+    unaware = Unaware(_cli_estimator().estimator, random_state=0)
+    _, plain_arrays, plain = _process(job, unaware)
     dropped = dataset_jobs(log, ground="drop")[0]
-    _, drop_arrays, drop = _process(dropped, _cli_estimator())
+    _, drop_arrays, drop = _process(dropped, unaware)
     assert plain["ground"] == drop["ground"] == "dropped" and plain["n"] == drop["n"]
     np.testing.assert_array_equal(plain_arrays["indices"], np.flatnonzero(~scene.ground))
     for key in ("indices", "labels", "flow", "sweep_flow"):
         np.testing.assert_array_equal(plain_arrays[key], drop_arrays[key])
+    # SweepRegistration itself names them: the map's ground joins its static world.
+    _, own_arrays, own = _process(job, _cli_estimator())
+    assert own["ground"] == "masks"
+    assert len(np.unique(own_arrays["labels"][scene.ground[own_arrays["indices"]]])) == 1
     _, kept_arrays, kept = _process(dataset_jobs(log, ground="keep")[0], Grounded(random_state=0))
     assert kept["ground"] == "kept" and seen["ground"] is None
     np.testing.assert_array_equal(kept_arrays["indices"], np.arange(len(scene.a)))

@@ -226,12 +226,17 @@ def _load_job(job, result):
             "or deleted since?)"
         )
     with reading(dataset):
+        ground = configuration.get("ground")
+        if ground is None:  # a run of an earlier version
+            ground = "drop" if configuration.get("drop_ground", True) else "keep"
         jobs = dataset_jobs(
             dataset,
             layout=configuration.get("layout", "auto"),
-            drop_ground=configuration.get("drop_ground", True),
+            ground=ground,
             pairs=configuration.get("pairs", "aligned"),
             capture_times=configuration.get("capture_times", True),
+            flow=configuration.get("flow"),
+            topic=configuration.get("topic"),
         )
     found = [j for j in jobs if j.name == result.name]
     if not found:
