@@ -230,7 +230,7 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
         "X does not look like correspondences: the flows b - a of nearest a-points differ "
         f"by {incoherence:.3g} (median), "
         + (f"more than tau={tau:g} and " if tau is not None else "")
-        + f"{incoherence / radius:.2g} times the scene's median radius ({radius:.3g}), as "
+        + f"{incoherence / radius:.1f} times the scene's median radius ({radius:.3g}), as "
         "when two point clouds sampled independently are stacked row by row. Each row "
         "must pair a point with where it went (a match, or a + flow). For two raw sweeps "
         "use SweepRegistration (mmreg register SWEEP0 --sweep SWEEP1, or mmreg run --pairs "
