@@ -4,7 +4,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 __all__ = ["MAX_ABS_COORDINATE", "check_coordinate_range", "check_labels", "compact_labels"]
-__all__ += ["check_paired", "invalid_rows", "split_correspondences", "MAX_INCOHERENCE"]
+__all__ += ["MAX_INCOHERENCE", "NotCorrespondencesError", "check_paired", "invalid_rows"]
+__all__ += ["split_correspondences"]
 
 #: Rows of correspondences pair a point with where it went, so neighbouring a-points
 #: move alike. Stacked rows whose flows ``b - a`` differ between nearest a-points by a
@@ -171,6 +172,10 @@ def invalid_rows(X):
     return invalid
 
 
+class NotCorrespondencesError(ValueError):
+    """Stacked rows ``[a | b]`` that pair points across the scene (see :func:`check_paired`)."""
+
+
 def check_paired(a, b, tau=None, nearest=None, spacing=None):
     """Raise ValueError if ``a`` and ``b`` are two point clouds rather than correspondences.
 
@@ -197,8 +202,8 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
 
     Raises
     ------
-    ValueError
-        Naming the incoherence found and what to use for two sweeps instead.
+    NotCorrespondencesError
+        A ValueError naming the incoherence found and what to use for two sweeps instead.
 
     Examples
     --------
@@ -210,7 +215,7 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
     >>> check_paired(a, rng.uniform(-20, 20, (1000, 3)), tau=1.5)
     Traceback (most recent call last):
     ...
-    ValueError: X does not look like correspondences: ...
+    mmreg._validation.NotCorrespondencesError: X does not look like correspondences: ...
     """
     if len(a) < 2:
         return
@@ -226,7 +231,7 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
         return
     if incoherence <= NEIGHBOUR_SPACINGS * float(np.median(spacing)):
         return
-    raise ValueError(
+    raise NotCorrespondencesError(
         "X does not look like correspondences: the flows b - a of nearest a-points differ "
         f"by {incoherence:.3g} (median), "
         + (f"more than tau={tau:g} and " if tau is not None else "")

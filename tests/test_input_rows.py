@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 from sklearn.metrics import adjusted_rand_score
 
 from mmreg import MultiModelRegistration
+from mmreg.cli import main
 from mmreg.datasets import make_scene
 from mmreg.estimators._multi_model_registration import ScaleWarning
 
@@ -85,3 +86,13 @@ def test_a_static_world_that_turns_83_degrees_warns_about_units():
         est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
     assert est.static_cluster_ >= 0
     assert any(w.filename == __file__ for w in caught)
+
+
+def test_the_command_line_refuses_two_point_clouds_in_one_line(tmp_path, capsys):
+    other = np.random.default_rng(1).permutation(len(STREET))
+    path = tmp_path / "stacked.npy"
+    np.save(path, np.hstack([STREET[:, :3], STREET[other, 3:]]))
+    assert main(["register", str(path), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mmreg: error: ") and err.count("\n") == 1
+    assert "stacked.npy" in err and "--sweep" in err

@@ -368,10 +368,14 @@ class MultiModelRegistration(BaseRegistration):
     dropped before the fit and labelled -1 (``n_invalid_``); :meth:`predict` labels them
     -1 and :meth:`score_samples` gives them NaN. Infinity is refused. ``X`` whose rows
     pair points across the scene (two point clouds sampled independently, stacked row by
-    row) is refused with a ValueError pointing to :class:`SweepRegistration`: the median
-    ``|b - a|`` exceeds both ``tau`` and half the median distance of the a-points from
-    their median (real flows: up to 0.29 of it; two Argoverse 2 sweeps stacked row by
-    row: 0.70 to 1.75). Duplicated rows do not change the labels of the others.
+    row) is refused with a ValueError pointing to :class:`SweepRegistration`: the flows
+    ``b - a`` of nearest a-points differ by a median of more than ``tau``, four times
+    the a-points' median spacing and half their median distance from their median
+    (generated and real flows: at most 0.27 of it, with half of the correspondences
+    wrong; two sweeps sampled independently: 1.24 to 1.85;
+    :func:`~mmreg._validation.check_paired`). The robust variants fit each distinct row
+    once (a copy of a row is no second measurement): duplicated rows take their
+    original's label and do not change the others'.
 
     Warnings: a :class:`~sklearn.exceptions.ConvergenceWarning` when ``max_iter`` ends
     the iterations before they settle, and a :class:`ScaleWarning` when ``tau`` is less
@@ -514,21 +518,21 @@ class MultiModelRegistration(BaseRegistration):
         vars(self).pop("_cluster_labels", None)  # a previous fit's
         invalid = invalid_rows(X)
         self.n_invalid_ = int(np.count_nonzero(invalid))
+        if self.n_invalid_ > len(X) - MIN_CORRESPONDENCES:
+            raise ValueError(
+                f"X holds {len(X) - self.n_invalid_} valid correspondences of {len(X)} "
+                f"(at least {MIN_CORRESPONDENCES} are needed): the others hold NaN or "
+                "points at the origin (0, 0, 0), a LiDAR driver's failed returns."
+            )
+        kept, source = self._rows_to_fit(X, invalid)
         init = self.init
-        if self.n_invalid_:
-            valid = ~invalid
-            if self.n_invalid_ > len(X) - MIN_CORRESPONDENCES:
-                raise ValueError(
-                    f"X holds {len(X) - self.n_invalid_} valid correspondences of {len(X)} "
-                    f"(at least {MIN_CORRESPONDENCES} are needed): the others hold NaN or "
-                    "points at the origin (0, 0, 0), a LiDAR driver's failed returns."
-                )
+        if kept is not None:
             if is_label_array(init):
-                init = check_labels(init, len(X), name="init labels")[valid]
-            X, a, b = X[valid], a[valid], b[valid]
+                init = check_labels(init, len(X), name="init labels")[kept]
+            X, a, b = X[kept], a[kept], b[kept]
         self._fit_valid(X, a, b, init)
-        if self.n_invalid_:
-            self._restore_invalid_rows(valid)
+        if kept is not None:
+            self._restore_rows(source)
         self._warn_if_static_world_turns()
         if self.max_iter > 0 and not self.converged_:
             warn_at_caller(
@@ -648,17 +652,43 @@ class MultiModelRegistration(BaseRegistration):
             return median_spacing(a, neighbours=neighbours)
         return float(self.tau * _MIN_MOTION_PER_TAU)
 
-    def _restore_invalid_rows(self, valid):
-        """Give the fitted per-row attributes a row for every input row; the invalid
-        ones labelled -1 (flow NaN). ``predict`` and ``score`` keep the valid rows'."""
+    def _rows_to_fit(self, X, invalid):
+        """The rows fitted, ``(kept, source)``: the valid ones and, robust variants, each
+        distinct row once (a copy of a row is no second measurement, and must not change
+        the answer); ``source[i]`` is the fitted row that row ``i`` takes its results
+        from, -1 if invalid. ``(None, None)`` when every row is fitted."""
+        valid = np.flatnonzero(~invalid)
+        source = np.full(len(X), -1, dtype=np.intp)
+        source[valid] = np.arange(len(valid))
+        kept = valid
+        # Duplicated rows share their first coordinate: the full test only then.
+        first = X[valid, 0]
+        if self.variant != "paper" and len(np.unique(first)) < len(first):
+            rows = np.ascontiguousarray(X[valid]).view(np.dtype((np.void, 8 * X.shape[1])))
+            _, firsts, inverse = np.unique(rows.ravel(), return_index=True, return_inverse=True)
+            if len(firsts) >= MIN_CORRESPONDENCES:
+                firsts_in_order = np.sort(firsts)
+                rank = np.empty(len(firsts), dtype=np.intp)
+                rank[np.argsort(firsts)] = np.arange(len(firsts))
+                kept = valid[firsts_in_order]
+                source[valid] = rank[inverse.ravel()]
+        if len(kept) == len(X):
+            return None, None
+        return kept, source
+
+    def _restore_rows(self, source):
+        """Give the fitted per-row attributes a row for every input row: a duplicate its
+        original's, an invalid one -1 (flow NaN). ``predict`` and ``score`` keep the
+        fitted rows'."""
         self._cluster_labels = self.labels_
-        n = len(valid)
+        fitted = source >= 0
+        n = len(source)
         labels = np.full(n, -1, dtype=np.intp)
-        labels[valid] = self.labels_
+        labels[fitted] = self.labels_[source[fitted]]
         init = np.full(n, -1, dtype=np.intp)
-        init[valid] = self.init_labels_
+        init[fitted] = self.init_labels_[source[fitted]]
         flow = np.full((n, self.flow_.shape[1]), np.nan)
-        flow[valid] = self.flow_
+        flow[fitted] = self.flow_[source[fitted]]
         self.labels_, self.init_labels_, self.flow_ = labels, init, flow
         self.outlier_mask_ = labels < 0
 
