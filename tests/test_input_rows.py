@@ -12,7 +12,7 @@ from sklearn.metrics import adjusted_rand_score
 from mmreg import MultiModelRegistration
 from mmreg.cli import main
 from mmreg.datasets import make_scene
-from mmreg.estimators._multi_model_registration import ScaleWarning
+from mmreg.estimators._multi_model_registration import ScaleWarning, _first_copies
 
 
 def _street_like(random_state=0):
@@ -96,3 +96,12 @@ def test_the_command_line_refuses_two_point_clouds_in_one_line(tmp_path, capsys)
     err = capsys.readouterr().err
     assert err.startswith("mmreg: error: ") and err.count("\n") == 1
     assert "stacked.npy" in err and "--sweep" in err
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**16), values=st.integers(1, 4))
+def test_first_copies_are_those_of_an_exact_row_comparison(seed, values):
+    # Few distinct values: many equal rows, and rows whose weighted sums tie by chance.
+    X = np.random.default_rng(seed).integers(0, values, (300, 6)).astype(float)
+    _, first, inverse = np.unique(X, axis=0, return_index=True, return_inverse=True)
+    assert_array_equal(_first_copies(X), first[inverse.ravel()])
