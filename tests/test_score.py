@@ -190,8 +190,13 @@ def test_score_checks_input_and_fit(scene):
     est = MultiModelRegistration(init=init).fit(X)
     with pytest.raises(ValueError, match="features"):
         est.score(X[:, :4])
-    with pytest.raises(ValueError, match="NaN"):
-        est.score_samples(np.where(np.eye(len(X), 6) == 1, np.nan, X))
+    # Rows with NaN hold no measurement: NaN, the others scored as without them.
+    padded = np.where(np.eye(len(X), 6) == 1, np.nan, X)
+    scores = est.score_samples(padded)
+    assert np.isnan(scores[:6]).all()
+    np.testing.assert_array_equal(scores[6:], est.score_samples(X[6:]))
+    with pytest.raises(ValueError, match="infinity"):
+        est.score_samples(np.where(np.eye(len(X), 6) == 1, np.inf, X))
 
 
 def test_a_refit_as_the_paper_variant_drops_the_robust_attributes(scene):

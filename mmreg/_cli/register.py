@@ -16,6 +16,7 @@ from mmreg._cli._common import (
     format_table,
     input_record,
     load_npz,
+    one_line,
     plural,
     reading,
     render_png,
@@ -35,6 +36,7 @@ from mmreg._cli._lidar_input import (
     is_sequence,
     read_frames,
 )
+from mmreg._validation import NotCorrespondencesError
 
 NAME = "register"
 HELP = "find the moving objects, their motions and the outliers in correspondences"
@@ -711,7 +713,10 @@ def register(
     init_used = init_name(args, X)
     sweep = read_sweep(args)
     timing = read_capture_times(args, len(X), None if sweep is None else len(sweep))
-    estimator, n_initial = _fit(X, init, args, steps, sweep, timing)
+    try:
+        estimator, n_initial = _fit(X, init, args, steps, sweep, timing)
+    except NotCorrespondencesError as error:
+        raise CLIError(f"{input_name}: {one_line(error)}") from None
     elapsed = time.perf_counter() - start
     residuals = moving = None
     if sweep is not None:  # what is written: the first sweep and where its points move

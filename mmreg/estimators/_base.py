@@ -1,6 +1,5 @@
 """What every registration estimator shares: input checks, fitted layout and ``predict``."""
 
-import warnings
 from numbers import Real
 
 import numpy as np
@@ -14,8 +13,8 @@ from mmreg._geometry import degenerate_groups
 from mmreg._likelihood import classify
 from mmreg._mixture import mixture_log_likelihood
 from mmreg._neighbors import query_workers
-from mmreg._validation import split_correspondences
-from mmreg._warnings import user_stacklevel
+from mmreg._validation import invalid_rows, split_correspondences
+from mmreg._warnings import warn
 from mmreg.estimators._em import default_sigma_floor, fit_cluster_models
 from mmreg.estimators._robust_steps import log_uniform_density
 
@@ -57,16 +56,34 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         "sigma_floor": [Interval(Real, 0, None, closed="neither"), None],
     }
 
-    def _validate_correspondences(self, X, *, reset):
-        """Check ``X``; return it with its a- and b-points."""
+    def _validate_correspondences(self, X, *, reset, allow_nan=False):
+        """Check ``X``; return it with its a- and b-points. ``allow_nan``: rows with NaN
+        pass (see :func:`~mmreg._validation.invalid_rows`), infinity does not."""
         X = validate_data(
             self,
             X,
             reset=reset,
             dtype=np.float64,
             ensure_min_samples=MIN_CORRESPONDENCES if reset else 1,
+            ensure_all_finite="allow-nan" if allow_nan else True,
         )
         return (X, *split_correspondences(X))
+
+    def _per_valid_row(self, X, a, b, function, fill):
+        """``function(a, b)`` on the valid rows of ``X``; ``fill`` on the invalid ones."""
+        invalid = invalid_rows(X) if self.__sklearn_tags__().input_tags.allow_nan else None
+        if invalid is None or not invalid.any():
+            return function(a, b)
+        valid = ~invalid
+        values = function(a[valid], b[valid])
+        out = np.full(len(X), fill, dtype=values.dtype)
+        out[valid] = values
+        return out
+
+    def _fitted_labels(self):
+        """The labels of the fitted rows, which the gate of :meth:`predict` measures from
+        (``labels_`` less the invalid rows that the fit left out)."""
+        return getattr(self, "_cluster_labels", self.labels_)
 
     def _store_labels(self, a, b, labels, sigma_floor=None):
         """Set the fitted attributes from final labels, fitting each cluster's motion."""
@@ -96,20 +113,18 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
 
     def _warn_if_degenerate(self, a, labels, n_clusters):
         if n_clusters == 0:
-            warnings.warn(
+            warn(
                 "No cluster survived: every correspondence is labelled -1 (outlier). "
                 + self._no_cluster_hint,
                 DegenerateInputWarning,
-                stacklevel=user_stacklevel(),
             )
             return
         degenerate = np.flatnonzero(degenerate_groups(a, labels, n_clusters))
         if len(degenerate):
-            warnings.warn(
+            warn(
                 f"The a-points of cluster(s) {degenerate.tolist()} are coincident or "
                 "collinear, so their rotation is one of many that fit equally well.",
                 DegenerateInputWarning,
-                stacklevel=user_stacklevel(),
             )
 
     def _gate_radius(self):
@@ -124,7 +139,7 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         """The gate of eq. (7) around the fitted clusters, for new correspondences."""
         return ClusterGate(
             self._cluster_points,
-            self.labels_,
+            self._fitted_labels(),
             self.n_clusters_,
             self._gate_radius(),
             workers=self._workers(),
@@ -142,8 +157,9 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         one; ``V`` is the volume of the bounding box of the fitted displacements
         ``b - a`` (:func:`~mmreg.estimators._robust_steps.log_uniform_density`).
         """
-        n = len(self.labels_)
-        share = max(float(np.mean(self.labels_ < 0)), 1.0 / max(n, 1))
+        labels = self._fitted_labels()
+        n = len(labels)
+        share = max(float(np.mean(labels < 0)), 1.0 / max(n, 1))
         return float(np.log(share)) + self._log_volume_density
 
     def score_samples(self, X):
@@ -160,7 +176,8 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         where a cluster is *admitted* as the E-step of eq. (7) admits it: when one of
         its fitted a-points lies within ``tau`` of ``a`` (every cluster if the estimator
         has no ``tau`` or ``tau=None``). A correspondence far from every cluster is
-        explained by the outlier component alone. The density is per unit volume of
+        explained by the outlier component alone; a row that holds no measurement
+        (NaN, where the estimator accepts it) gets NaN. The density is per unit volume of
         ``b``, in the units of the points, as :meth:`GaussianMixture.score_samples
         <sklearn.mixture.GaussianMixture.score_samples>` returns it.
 
@@ -174,7 +191,12 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         log_likelihood : ndarray of shape (n_samples,)
         """
         check_is_fitted(self, "labels_")
-        _, a, b = self._validate_correspondences(X, reset=False)
+        allow_nan = self.__sklearn_tags__().input_tags.allow_nan
+        X, a, b = self._validate_correspondences(X, reset=False, allow_nan=allow_nan)
+        return self._per_valid_row(X, a, b, self._log_likelihood, fill=np.nan)
+
+    def _log_likelihood(self, a, b):
+        """:meth:`score_samples` on valid rows."""
         return mixture_log_likelihood(
             a,
             b,
@@ -190,8 +212,9 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
     def score(self, X, y=None):
         """Mean log-likelihood per correspondence under the fitted mixture.
 
-        The mean of :meth:`score_samples`, as :meth:`GaussianMixture.score
-        <sklearn.mixture.GaussianMixture.score>`: larger is better, so that
+        The mean of :meth:`score_samples` over the rows that hold a measurement, as
+        :meth:`GaussianMixture.score <sklearn.mixture.GaussianMixture.score>`: larger is
+        better, so that
         :class:`~sklearn.model_selection.GridSearchCV` can choose parameters without
         labels. Scores of one scene are comparable between estimators and parameters;
         scores of scenes in other units are not (a density per unit volume).
@@ -207,7 +230,7 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         -------
         log_likelihood : float
         """
-        return float(np.mean(self.score_samples(X)))
+        return float(np.nanmean(self.score_samples(X)))
 
     def predict(self, X):
         """Assign correspondences to the fitted motions.
@@ -226,7 +249,12 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         labels : ndarray of shape (n_samples,)
         """
         check_is_fitted(self, "labels_")
-        _, a, b = self._validate_correspondences(X, reset=False)
+        allow_nan = self.__sklearn_tags__().input_tags.allow_nan
+        X, a, b = self._validate_correspondences(X, reset=False, allow_nan=allow_nan)
+        return self._per_valid_row(X, a, b, self._classify, fill=-1)
+
+    def _classify(self, a, b):
+        """:meth:`predict` by eq. (7) on valid rows."""
         return classify(
             a,
             b,

@@ -1,6 +1,5 @@
 """Classification-EM multi-model registration: the robust default and the paper's Algorithm 1."""
 
-import warnings
 from numbers import Integral, Real
 
 import numpy as np
@@ -12,12 +11,12 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from mmreg._gate import ClusterGate
-from mmreg._geometry import column_bounds
+from mmreg._geometry import column_bounds, rotation_angle
 from mmreg._neighbors import NeighbourTable
-from mmreg._validation import check_labels
+from mmreg._validation import check_labels, check_paired, invalid_rows
 from mmreg._voxels import voxel_representatives, voxel_sample
-from mmreg._warnings import user_stacklevel
-from mmreg.estimators._base import BaseRegistration
+from mmreg._warnings import warn
+from mmreg.estimators._base import MIN_CORRESPONDENCES, BaseRegistration
 from mmreg.estimators._em import multi_model_em
 from mmreg.estimators._robust_em import (
     _FALSE_ALARMS,
@@ -56,6 +55,15 @@ _MIN_GATE_SPACINGS = 4.0
 # the scene: it never separates anything, and objects that move alike merge however
 # far apart they are. Beyond this many diagonals the units of tau are probably wrong.
 _MAX_GATE_DIAMETERS = 1.0
+# min_motion="auto": this fraction of tau, 5 cm at the street scenes' tau = 5 m (the
+# gate of `mmreg run`, SweepRegistration and benchmarks/real.py), Argoverse 2's rule for
+# dynamic points (0.5 m/s between sweeps 0.1 s apart). A length, so it scales with tau.
+_MIN_MOTION_PER_TAU = 0.01
+# The static world (the sensor's own motion) turns a few degrees between two frames;
+# beyond this the flow and the points are probably in other units.
+MAX_STATIC_TURN_DEGREES = 30.0
+# Pieces of one static world turn alike (their motion is the sensor's).
+_SAME_TURN_DEGREES = 10.0
 
 
 class ScaleWarning(UserWarning):
@@ -168,15 +176,18 @@ class MultiModelRegistration(BaseRegistration):
         cars), the gate of eq. (7) admits it everywhere, and ``static_cluster_`` names it.
         Other motions keep the gate: two far-apart objects that move alike stay two
         objects. None: no static world.
-    min_motion : float, default=0.05
+    min_motion : float or "auto", default="auto"
         ``variant="sweep"``: a cluster whose motion carries its points less than this far
         (RMS, in the units of the points) from where the static world's motion carries
         them, beyond the cluster's own scatter (the RMS of its residuals), is part of the
-        static world, and a cluster is ``moving_`` only beyond it. The default is
-        Argoverse 2's rule for dynamic points (0.5 m/s between sweeps 0.1 s apart), which
-        also absorbs the annotation jitter of parked cars; the scatter keeps a patch of
-        a network's flow that errs coherently (ZeroFlow: a wall 36 m away shifted by
-        6 cm, scattered by 2 cm) in the static world.
+        static world, and a cluster is ``moving_`` only beyond it. ``"auto"``:
+        ``tau / 100``, so that it scales with the units of ``tau``: 5 cm at the street
+        scenes' ``tau = 5`` m, Argoverse 2's rule for dynamic points (0.5 m/s between
+        sweeps 0.1 s apart), which also absorbs the annotation jitter of parked cars
+        (give it explicitly with another ``tau``); with ``tau=None``, the median distance
+        between neighbouring a-points. The scatter keeps a patch of a network's flow
+        that errs coherently (ZeroFlow: a wall 36 m away shifted by 6 cm, scattered by
+        2 cm) in the static world. ``min_motion_`` holds the value used.
     motion_tolerance : float, default=0.2
         ``variant="sweep"``: two touching moving clusters are one object when each one's
         motion carries the other's points within this fraction of their motion relative
@@ -245,7 +256,13 @@ class MultiModelRegistration(BaseRegistration):
     n_clusters_ : int
         Number of clusters found.
     outlier_mask_ : ndarray of shape (n_samples,)
-        True for the correspondences labelled -1.
+        True for the correspondences labelled -1 (the invalid rows among them).
+    n_invalid_ : int
+        Rows that hold no measurement and were left out of the fit, labelled -1 (flow
+        NaN): rows with NaN (padding) and rows whose a- or b-point lies exactly at the
+        origin together with another row's (a LiDAR driver's failed returns; see Notes).
+    min_motion_ : float
+        The ``min_motion`` used (``"auto"`` resolved).
     flow_ : ndarray of shape (n_samples, d)
         The rigid scene flow of every correspondence, ``R_j a_i + t_j - a_i`` for
         cluster ``j``. An outlier is a wrong ``b_i``, not a wrong ``a_i``: its a-point
@@ -347,11 +364,32 @@ class MultiModelRegistration(BaseRegistration):
     * The returned poses, sigmas and weights are refitted on the final clusters (robust
       variant: on their inliers).
 
+    **Inputs that are not what they claim.** Rows with NaN, and rows whose a- or
+    b-point lies exactly at the origin ``(0, ..., 0)`` together with another row's
+    (LiDAR drivers write failed returns there; one point at the origin is kept), are
+    dropped before the fit and labelled -1 (``n_invalid_``); :meth:`predict` labels them
+    -1 and :meth:`score_samples` gives them NaN. Infinity is refused. ``X`` whose rows
+    pair points across the scene (two point clouds sampled independently, stacked row by
+    row) is refused with a ValueError pointing to :class:`SweepRegistration`: the flows
+    ``b - a`` of nearest a-points differ by a median of more than ``tau``, four times
+    the a-points' median spacing and half their median distance from their median
+    (generated and real flows: at most 0.27 of it, with half of the correspondences
+    wrong; two sweeps sampled independently: 1.24 to 1.85;
+    :func:`~mmreg._validation.check_paired`). The robust variants fit each distinct row
+    once (a copy of a row is no second measurement): duplicated rows take their
+    original's label and do not change the others'.
+
     Warnings: a :class:`~sklearn.exceptions.ConvergenceWarning` when ``max_iter`` ends
     the iterations before they settle, and a :class:`ScaleWarning` when ``tau`` is less
     than four times the median nearest-neighbour distance of the a-points, or more than
     the diagonal of their bounding box (the gate then never separates anything); the
-    points are probably in other units than ``tau``.
+    points are probably in other units than ``tau``. A :class:`ScaleWarning` also when
+    the static world of ``variant="sweep"`` (``static_cluster_``, or clusters that turn
+    alike and hold more than ``static_share`` of the correspondences) turns by more than 30
+    degrees: a sensor
+    turns a few degrees between two frames, so the flow ``b - a`` is probably in other
+    units than the points (points in metres, flow in millimetres: 83 degrees on an
+    Argoverse 2 sweep).
 
     :meth:`score` is the mean log-likelihood of correspondences under the fitted
     mixture, the gate of eq. (7) applied as the E-step applies it (the static world of
@@ -411,7 +449,7 @@ class MultiModelRegistration(BaseRegistration):
         "n_hypotheses": [Interval(Integral, 0, None, closed="left")],
         "noise_model": [StrOptions({"range", "constant"})],
         "static_share": [Interval(Real, 0, 1, closed="right"), None],
-        "min_motion": [Interval(Real, 0, None, closed="left")],
+        "min_motion": [Interval(Real, 0, None, closed="left"), StrOptions({"auto"})],
         "motion_tolerance": [Interval(Real, 0, None, closed="left")],
         "skip_steps": [tuple, list],
         "tol": [Interval(Real, 0, 1, closed="left"), None],
@@ -433,7 +471,7 @@ class MultiModelRegistration(BaseRegistration):
         n_hypotheses=32,
         noise_model="range",
         static_share=0.5,
-        min_motion=0.05,
+        min_motion="auto",
         motion_tolerance=0.2,
         tol=None,
         skip_steps=(),
@@ -478,7 +516,36 @@ class MultiModelRegistration(BaseRegistration):
         self : MultiModelRegistration
             The fitted estimator.
         """
-        X, a, b = self._validate_correspondences(X, reset=True)
+        X, a, b = self._validate_correspondences(X, reset=True, allow_nan=True)
+        vars(self).pop("_cluster_labels", None)  # a previous fit's
+        invalid = invalid_rows(X)
+        self.n_invalid_ = int(np.count_nonzero(invalid))
+        if self.n_invalid_ > len(X) - MIN_CORRESPONDENCES:
+            raise ValueError(
+                f"X holds {len(X) - self.n_invalid_} valid correspondences of {len(X)} "
+                f"(at least {MIN_CORRESPONDENCES} are needed): the others hold NaN or "
+                "points at the origin (0, 0, 0), a LiDAR driver's failed returns."
+            )
+        kept, source = self._rows_to_fit(X, invalid)
+        init = self.init
+        if kept is not None:
+            if is_label_array(init):
+                init = check_labels(init, len(X), name="init labels")[kept]
+            X, a, b = X[kept], a[kept], b[kept]
+        self._fit_valid(X, a, b, init)
+        if kept is not None:
+            self._restore_rows(source)
+        self._warn_if_static_world_turns()
+        if self.max_iter > 0 and not self.converged_:
+            warn(
+                f"The EM did not settle within max_iter={self.max_iter} iterations; raise "
+                "max_iter (or, with the paper variant, use a coarser initial clustering).",
+                ConvergenceWarning,
+            )
+        return self
+
+    def _fit_valid(self, X, a, b, init):
+        """:meth:`fit` on the valid rows."""
         workers = self._workers()
         all_a, all_b, n = a, b, len(X)
         rows = self._fitted_rows(a)
@@ -490,8 +557,17 @@ class MultiModelRegistration(BaseRegistration):
             if self.variant != "paper" and reads_neighbours(self.skip_steps)
             else None
         )
+        # Before any warning about tau: two sweeps stacked row by row are no input at all.
+        known = neighbours is not None and neighbours.k > 1
+        check_paired(
+            a,
+            b,
+            self.tau,
+            nearest=neighbours.index[:, 1] if known else None,
+            spacing=neighbours.distance[:, 1] if known else None,
+        )
         self._warn_if_tau_off_scale(a, neighbours)
-        init = self.init
+        self.min_motion_ = self._resolve_min_motion(a, neighbours)
         if rows is not None and is_label_array(init):
             init = check_labels(init, n, name="init labels")[rows]
         self.init_labels_ = initial = initial_labels(
@@ -531,7 +607,7 @@ class MultiModelRegistration(BaseRegistration):
                 n_hypotheses=self.n_hypotheses,
                 noise_model=self.noise_model,
                 static_share=self.static_share,
-                min_motion=self.min_motion,
+                min_motion=self.min_motion_,
                 motion_tolerance=self.motion_tolerance,
                 tol=(1e-2 if self.variant == "sweep" else 1e-3) if self.tol is None else self.tol,
                 skip_steps=tuple(self.skip_steps),
@@ -568,14 +644,79 @@ class MultiModelRegistration(BaseRegistration):
         self.outlier_mask_ = self.labels_ < 0
         self.n_iter_ = result.n_iter
         self.converged_ = result.converged
-        if self.max_iter > 0 and not self.converged_:
-            warnings.warn(
-                f"The EM did not settle within max_iter={self.max_iter} iterations; raise "
-                "max_iter (or, with the paper variant, use a coarser initial clustering).",
-                ConvergenceWarning,
-                stacklevel=user_stacklevel(),
+
+    def _resolve_min_motion(self, a, neighbours=None):
+        """``min_motion`` as a length: ``"auto"`` is ``tau / 100``, or the median spacing
+        of the a-points when there is no ``tau``."""
+        if self.min_motion != "auto":
+            return float(self.min_motion)
+        if self.tau is None:
+            return median_spacing(a, neighbours=neighbours)
+        return float(self.tau * _MIN_MOTION_PER_TAU)
+
+    def _rows_to_fit(self, X, invalid):
+        """The rows fitted, ``(kept, source)``: the valid ones and, robust variants, each
+        distinct row once (a copy of a row is no second measurement, and must not change
+        the answer); ``source[i]`` is the fitted row that row ``i`` takes its results
+        from, -1 if invalid. ``(None, None)`` when every row is fitted."""
+        valid = np.flatnonzero(~invalid)
+        first_of = np.arange(len(valid))
+        if self.variant != "paper":
+            first_of = _first_copies(X[valid])
+        is_first = first_of == np.arange(len(valid))
+        if np.count_nonzero(is_first) < MIN_CORRESPONDENCES:
+            first_of, is_first = np.arange(len(valid)), np.ones(len(valid), dtype=bool)
+        kept = valid[is_first]
+        source = np.full(len(X), -1, dtype=np.intp)
+        source[valid] = (np.cumsum(is_first) - 1)[first_of]
+        if len(kept) == len(X):
+            return None, None
+        return kept, source
+
+    def _restore_rows(self, source):
+        """Give the fitted per-row attributes a row for every input row: a duplicate its
+        original's, an invalid one -1 (flow NaN). ``predict`` and ``score`` keep the
+        fitted rows'."""
+        self._cluster_labels = self.labels_
+        fitted = source >= 0
+        n = len(source)
+        labels = np.full(n, -1, dtype=np.intp)
+        labels[fitted] = self.labels_[source[fitted]]
+        init = np.full(n, -1, dtype=np.intp)
+        init[fitted] = self.init_labels_[source[fitted]]
+        flow = np.full((n, self.flow_.shape[1]), np.nan)
+        flow[fitted] = self.flow_[source[fitted]]
+        self.labels_, self.init_labels_, self.flow_ = labels, init, flow
+        self.outlier_mask_ = labels < 0
+
+    def _warn_if_static_world_turns(self):
+        """A static world that turns by more than MAX_STATIC_TURN_DEGREES: other units.
+
+        The static world is ``static_cluster_`` or, when the sweep variant found none
+        (a flow in other units breaks it into pieces: Argoverse 2's ground truth times
+        1000 gives 54 clusters turning 79-82 degrees), the clusters that turn within
+        ``_SAME_TURN_DEGREES`` of the largest one, if they hold more than ``static_share``
+        of the correspondences.
+        """
+        if self.variant != "sweep" or self.static_share is None or not self.n_clusters_:
+            return
+        if self.rotations_.shape[-1] not in (2, 3):
+            return
+        static = getattr(self, "static_cluster_", -1)
+        reference = static if static >= 0 else int(np.argmax(self.weights_))
+        alike = rotation_angle(self.rotations_, self.rotations_[reference]) <= _SAME_TURN_DEGREES
+        if static >= 0:
+            alike = np.arange(self.n_clusters_) == static
+        share = float(np.sum(self.weights_[alike]))
+        angle = float(rotation_angle(self.rotations_[reference]))
+        if share > self.static_share and angle > MAX_STATIC_TURN_DEGREES:
+            warn(
+                f"The static world ({share:.0%} of the correspondences) turns {angle:.0f} "
+                "degrees between a and b; a sensor turns a few degrees between two frames. "
+                "Are the flow b - a and the points in the same units (e.g. points in "
+                "metres and flow in millimetres)?",
+                ScaleWarning,
             )
-        return self
 
     def _fitted_rows(self, a):
         """The rows the loop fits: one per voxel of ``voxel_size``, None for all; sets
@@ -638,7 +779,7 @@ class MultiModelRegistration(BaseRegistration):
             sigma_floor=self.sigma_floor,
             n_hypotheses=self.n_hypotheses,
             confidence=self.confidence,
-            min_motion=self.min_motion,
+            min_motion=self.min_motion_,
             static=result.static_cluster,
             moving=result.moving,
             motion_tolerance=(
@@ -667,7 +808,7 @@ class MultiModelRegistration(BaseRegistration):
             noise_scale=noise_scale,
             confidence=self.confidence if "trimming" not in self.skip_steps else 1.0,
             sweep=self.variant == "sweep",
-            min_motion=self.min_motion,
+            min_motion=self.min_motion_,
         )
         return models.rotations, models.translations, models.sigmas
 
@@ -676,25 +817,23 @@ class MultiModelRegistration(BaseRegistration):
             return
         spacing = median_spacing(a, neighbours=neighbours)
         if self.tau < _MIN_GATE_SPACINGS * spacing:
-            warnings.warn(
+            warn(
                 f"tau={self.tau:g} spans fewer than {_MIN_GATE_SPACINGS:g} times the median "
                 f"distance between neighbouring a-points ({spacing:.3g}): clusters can grow "
                 "by a point or two per iteration and hardly merge. Are tau and the points in "
                 "the same units?",
                 ScaleWarning,
-                stacklevel=user_stacklevel(),
             )
         # Coincident a-points (diameter 0) get a DegenerateInputWarning instead.
         low, high = column_bounds(a)
         diameter = float(np.linalg.norm(high - low))
         if 0 < _MAX_GATE_DIAMETERS * diameter < self.tau:
-            warnings.warn(
+            warn(
                 f"tau={self.tau:g} exceeds the diagonal of the a-points' bounding box "
                 f"({diameter:.3g}): the gate of eq. (7) joins any two points of the scene, "
                 "so objects that move alike merge however far apart they are. Are tau and "
                 "the points in the same units? (tau=None turns the gate off on purpose.)",
                 ScaleWarning,
-                stacklevel=user_stacklevel(),
             )
 
     def predict(self, X):
@@ -718,7 +857,11 @@ class MultiModelRegistration(BaseRegistration):
         if self.variant == "paper":
             return super().predict(X)
         check_is_fitted(self, "labels_")
-        _, a, b = self._validate_correspondences(X, reset=False)
+        X, a, b = self._validate_correspondences(X, reset=False, allow_nan=True)
+        return self._per_valid_row(X, a, b, self._judge, fill=-1)
+
+    def _judge(self, a, b):
+        """The robust variants' :meth:`predict` on valid rows."""
         return judge_correspondences(
             a,
             b,
@@ -742,17 +885,44 @@ class MultiModelRegistration(BaseRegistration):
         static = getattr(self, "static_cluster_", -1)
         return ClusterGate(
             self._cluster_points,
-            self.labels_,
+            self._fitted_labels(),
             self.n_clusters_,
             self.tau,
             ungated=[static] if static >= 0 else [],
             workers=self._workers(),
         )
 
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        # Rows with NaN are padding: left out of the fit and labelled -1 (n_invalid_).
+        tags.input_tags.allow_nan = True
+        return tags
+
     def _log_outlier_density(self):
         """The robust variants' fitted outlier component; the paper's: the base class's."""
         fitted = getattr(self, "log_outlier_density_", None)
         return super()._log_outlier_density() if fitted is None else fitted
+
+
+def _first_copies(X):
+    """For each row of ``X``, the first row equal to it (itself if none is).
+
+    Rows are compared through one linear combination of their columns (equal rows give
+    equal values), and exactly only where two values agree: a sort instead of a sort of
+    every row's bytes (30 ms against 120 ms on an Argoverse 2 sweep).
+    """
+    first_of = np.arange(len(X))
+    weights = np.sqrt(np.arange(2, X.shape[1] + 2, dtype=float))  # rationally independent
+    key = X @ weights
+    order = np.argsort(key, kind="stable")
+    tie = key[order[1:]] == key[order[:-1]]
+    if not tie.any():
+        return first_of
+    candidates = np.sort(order[np.concatenate([tie, [False]]) | np.concatenate([[False], tie])])
+    rows = np.ascontiguousarray(X[candidates]).view(np.dtype((np.void, 8 * X.shape[1])))
+    _, firsts, inverse = np.unique(rows.ravel(), return_index=True, return_inverse=True)
+    first_of[candidates] = candidates[firsts][inverse.ravel()]
+    return first_of
 
 
 def _static_motion(result):
