@@ -141,3 +141,22 @@ def _fit_scaled(street, scale):
     inner = MultiModelRegistration(variant="sweep", tau=5.0 * scale, random_state=0)
     est = SweepRegistration(inner, random_state=0)
     return est.fit(street.a * scale, sweep=street.sweep * scale)
+
+
+def test_invalid_returns_are_left_out_and_counted():
+    """A driver's failed returns at the origin and NaN padding move with no object."""
+    street = make_lidar_sweeps(n_moving=2, n_beams=16, n_azimuths=512, random_state=0)
+    clean = SweepRegistration(random_state=0).fit(street.a, sweep=street.sweep)
+    rng = np.random.default_rng(0)
+    zeros, nans = np.zeros((500, 3)), np.full((40, 3), np.nan)
+    a = np.vstack([street.a, zeros, nans])
+    order = rng.permutation(len(a))
+    sweep = np.vstack([street.sweep, zeros[:300], nans[:20]])
+    est = SweepRegistration(random_state=0).fit(a[order], sweep=sweep)
+    assert est.n_invalid_ == 540 and est.n_sweep_invalid_ == 320
+    invalid = order >= len(street.a)
+    assert np.all(est.labels_[invalid] == -1) and np.isnan(est.flow_[invalid]).all()
+    valid = np.flatnonzero(~invalid)
+    labels = est.labels_[valid[np.argsort(order[valid])]]
+    assert adjusted_rand_score(clean.labels_, labels) > 0.99
+    assert est.ground_mask_.shape == (len(a),) and not est.ground_mask_[invalid].any()

@@ -744,7 +744,8 @@ def register(
             f"{int(estimator.outlier_mask_.sum()):,} outliers"
         )
         if title is None:
-            title = f"mmreg register {input_name}: {len(X):,} correspondences -> {found}"
+            what = "points" if sweep is not None else "correspondences"
+            title = f"{Path(str(input_name)).name}: {len(X):,} {what} -> {found}"
         else:
             title = title.format(found=found)
         png = None

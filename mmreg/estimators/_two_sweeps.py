@@ -30,7 +30,7 @@ from mmreg._island_motions import choose_island_motions, translation_starts
 from mmreg._islands import voxel_islands
 from mmreg._motion import _group_median, moving_clusters, static_cluster
 from mmreg._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
-from mmreg._validation import check_coordinate_range
+from mmreg._validation import check_coordinate_range, invalid_rows
 
 __all__ = ["SweepRegistration"]
 
@@ -304,6 +304,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Raw mode: ``(R, t)`` of the ego-motion ICP.
     max_distance_, island_radius_, max_displacement_ : float
         The lengths used: the parameters, or what ``"auto"`` made of them.
+    n_invalid_, n_sweep_invalid_ : int
+        Rows of ``X`` and points of ``sweep`` that hold no measurement (NaN, or the
+        origin where a LiDAR driver writes its failed returns, when more than one point
+        lies there): left out of the fit; in ``X`` they are labelled -1 with a NaN flow.
     ground_mask_ : ndarray of shape (n_samples,) or None
         Raw mode: which points of the first sweep were taken for the ground (all in the
         static world); None when the ground was kept.
@@ -480,7 +484,74 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         -------
         self : SweepRegistration
         """
-        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3)
+        X = validate_data(
+            self, X, dtype=np.float64, ensure_min_samples=3, ensure_all_finite="allow-nan"
+        )
+        if np.isinf(X).any():
+            raise ValueError("X contains infinity.")
+        invalid = invalid_rows(np.hstack([X, X]) if X.shape[1] == 3 else X)
+        self.n_invalid_ = int(np.count_nonzero(invalid))
+        self.n_sweep_invalid_ = 0
+        sweep_invalid = None
+        if sweep is not None:
+            sweep = np.asarray(sweep)
+            if sweep.dtype.kind in "iuf" and sweep.ndim == 2 and sweep.shape[1] == 3:
+                sweep = sweep.astype(np.float64)
+                if np.isinf(sweep).any():
+                    raise ValueError("sweep contains infinity.")
+                sweep_invalid = invalid_rows(np.hstack([sweep, sweep]))
+                self.n_sweep_invalid_ = int(np.count_nonzero(sweep_invalid))
+                if len(sweep) - self.n_sweep_invalid_ < _MIN_SWEEP_POINTS <= len(sweep):
+                    raise ValueError(
+                        f"sweep has {len(sweep) - self.n_sweep_invalid_} valid points (the "
+                        f"other {self.n_sweep_invalid_} are NaN or at the origin); at least "
+                        f"{_MIN_SWEEP_POINTS} are needed."
+                    )
+        if not self.n_invalid_ and not self.n_sweep_invalid_:
+            return self._fit(X, sweep, times, sweep_times, interval, ground, sweep_ground)
+        # Invalid returns (NaN padding, a driver's failed returns at the origin) are no
+        # measurement: the fit leaves them out and they come back as outliers.
+        if invalid.all():
+            raise ValueError(f"every row of X is invalid (NaN, or at the origin); got {len(X)}.")
+        keep = ~invalid
+        keep_sweep = np.ones(0 if sweep is None else len(sweep), dtype=bool)
+        if sweep_invalid is not None:
+            keep_sweep = ~sweep_invalid
+
+        def rows(values, mask, name):
+            if values is None:
+                return None
+            values = np.asarray(values)
+            if values.shape[:1] != mask.shape:
+                raise ValueError(
+                    f"{name} must have one entry per point ({len(mask)}); got {values.shape}."
+                )
+            return values[mask]
+
+        self._fit(
+            X[keep],
+            None if sweep is None else sweep[keep_sweep],
+            rows(times, keep, "times"),
+            rows(sweep_times, keep_sweep, "sweep_times"),
+            interval,
+            rows(ground, keep, "ground"),
+            rows(sweep_ground, keep_sweep, "sweep_ground"),
+        )
+        labels = np.full(len(X), -1, dtype=self.labels_.dtype)
+        labels[keep] = self.labels_
+        flow = np.full((len(X), self.flow_.shape[1]), np.nan)
+        flow[keep] = self.flow_
+        self.labels_, self.flow_, self.outlier_mask_ = labels, flow, labels < 0
+        if self.ground_mask_ is not None:
+            ground_mask = np.zeros(len(X), dtype=bool)
+            ground_mask[keep] = self.ground_mask_
+            sweep_ground_mask = np.zeros(len(keep_sweep), dtype=bool)
+            sweep_ground_mask[keep_sweep] = self.sweep_ground_mask_
+            self.ground_mask_, self.sweep_ground_mask_ = ground_mask, sweep_ground_mask
+        return self
+
+    def _fit(self, X, sweep, times, sweep_times, interval, ground, sweep_ground):
+        """``fit`` on valid rows: ``X`` validated, invalid returns of both sweeps left out."""
         check_coordinate_range(X)
         rng = check_random_state(self.random_state)
         self._resolve_lengths()
