@@ -155,6 +155,15 @@ def _join_slides(a, labels, motions, static, sigma, target):
     return labels, tuple(values[kept] for values in motions), int(index[static])
 
 
+def _check_features(X):
+    """X as (n, 6) correspondences or (n, 3) points; a clear ValueError otherwise."""
+    if X.shape[1] not in (3, 6):
+        raise ValueError(
+            "X must be (n, 6) correspondences [a | b] or (n, 3) points of the first "
+            f"sweep; got X with n_features = {X.shape[1]}."
+        )
+
+
 def _check_mask(mask, n, name):
     """A boolean mask of n points; a clear ValueError otherwise."""
     mask = np.asarray(mask)
@@ -489,6 +498,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         )
         if np.isinf(X).any():
             raise ValueError("X contains infinity.")
+        if sweep is not None:
+            _check_features(X)
         invalid = invalid_rows(np.hstack([X, X]) if X.shape[1] == 3 else X)
         self.n_invalid_ = int(np.count_nonzero(invalid))
         self.n_sweep_invalid_ = 0
@@ -575,11 +586,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             self.moving_ = moving
             self.ground_mask_ = self.sweep_ground_mask_ = None
             return self
-        if X.shape[1] not in (3, 6):
-            raise ValueError(
-                "X must be (n, 6) correspondences [a | b] or (n, 3) points of the first "
-                f"sweep; got X with n_features = {X.shape[1]}."
-            )
+        _check_features(X)
         sweep = _check_sweep(sweep, 3)
         timing = _check_timing(times, sweep_times, interval, len(X), len(sweep))
         if X.shape[1] == 6 and (ground is not None or sweep_ground is not None):
