@@ -500,7 +500,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             raise ValueError("X contains infinity.")
         if sweep is not None:
             _check_features(X)
-        invalid = invalid_rows(np.hstack([X, X]) if X.shape[1] == 3 else X)
+        if X.shape[1] == 3:
+            invalid = invalid_rows(np.hstack([X, X]))
+        elif X.shape[1] % 2 == 0:
+            invalid = invalid_rows(X)
+        else:  # refused with its shape below
+            invalid = np.zeros(len(X), dtype=bool)
         self.n_invalid_ = int(np.count_nonzero(invalid))
         self.n_sweep_invalid_ = 0
         sweep_invalid = None
