@@ -91,6 +91,9 @@ JOBS_FOLDER = "jobs"
 RESULT_KEYS = ("labels", "rotations", "translations", "sigmas", "flow", "indices", "meta")
 # Where the flow of every sweep goes in the Argoverse 2 scene-flow challenge's layout.
 SCENE_FLOW_FOLDER = "av2_scene_flow"
+# One picture per job (``pictures=True``), and the key that carries it from the worker.
+PICTURES_FOLDER = "pictures"
+_PICTURE = "picture_png"
 SCENE_FLOW_COLUMNS = ("flow_tx_m", "flow_ty_m", "flow_tz_m")
 # The columns every summary starts with; metrics and estimator-specific numbers follow.
 SUMMARY_COLUMNS = [
@@ -281,7 +284,26 @@ def _known_ground(data, model):
     return out, "dropped"
 
 
-def _process(job, estimator):
+def _picture(X, model, data, name):
+    """The PNG bytes of one job's result, drawn as ``mmreg view`` draws it."""
+    import io
+
+    from mmreg.plotting import plot_result
+
+    figure = plot_result(
+        X[:, :3],
+        model.labels_,
+        (model.rotations_, model.translations_),
+        moving=getattr(model, "moving_", None),
+        interval=data.get("interval"),
+        title=f"{name}: {len(X):,} points -> {model.n_clusters_} clusters",
+    )
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=110)
+    return buffer.getvalue()
+
+
+def _process(job, estimator, pictures=False):
     """Load and fit one job (runs on a worker); ``(name, arrays or None, row)``.
 
     An error of the job becomes its row (status ``"error"``), so one bad input does not
@@ -349,10 +371,22 @@ def _process(job, estimator):
                 np.asarray(points, float), indices, model.flow_, *_static_motion(model)
             )
             arrays["sweep_flow"], arrays["sweep_dynamic"] = flow.astype(np.float32), dynamic
+        if pictures:  # drawn here, on the worker; written by the caller with the result
+            arrays[_PICTURE] = np.frombuffer(_picture(X, model, data, job.name), dtype=np.uint8)
     except Exception as error:  # one job's failure is its row, not the run's end
         row["error"] = f"{type(error).__name__}: {' '.join(str(error).split())}"[:1000]
         return job.name, None, row
     return job.name, arrays, row
+
+
+def _write_picture(out, name, png):
+    """``out/pictures/<name>.png``, whole or not at all."""
+    from mmreg.io import atomic_write
+
+    folder = Path(out) / PICTURES_FOLDER
+    folder.mkdir(exist_ok=True)
+    with atomic_write(folder / f"{name}.png") as handle:
+        handle.write(png.tobytes())
 
 
 def _result_path(out, name):
@@ -531,6 +565,7 @@ def run_dataset(
     n_workers=None,
     overwrite=False,
     progress=True,
+    pictures=False,
 ):
     """Fit ``estimator`` on every job of a dataset on Dask; resumable, one file per job.
 
@@ -579,6 +614,10 @@ def run_dataset(
         Run every job again, replacing the results found in ``out``.
     progress : bool, default=True
         A tqdm progress bar over the jobs on stderr.
+    pictures : bool, default=False
+        Also draw every job's result as ``mmreg view`` does (a LiDAR sweep from above)
+        into ``out/pictures/<name>.png``; drawn on the workers. Jobs already done are not
+        drawn again.
 
     Returns
     -------
@@ -668,9 +707,11 @@ def run_dataset(
         if todo:
             with _dask_backend(scheduler, n_workers):
                 by_name = {job.name: job for job in todo}
-                tasks = (joblib.delayed(_process)(job, estimator) for job in todo)
+                tasks = (joblib.delayed(_process)(job, estimator, pictures) for job in todo)
                 parallel = joblib.Parallel(n_jobs=-1, return_as="generator_unordered")
                 for name, arrays, row in parallel(tasks):
+                    if arrays is not None and _PICTURE in arrays:
+                        _write_picture(out, name, arrays.pop(_PICTURE))
                     if arrays is not None:
                         _write_result(_result_path(out, name), arrays, row, fingerprints[name])
                         _write_sweep_flow(out, by_name[name], arrays)

@@ -361,3 +361,17 @@ def test_argoverse2_log_from_the_two_sweeps(tmp_path, scheduler, capsys):
         assert row["iou"] == 1.0 and row["moving_found"] == 1.0 and row["epe3d"] < 0.1
     configuration = json.loads((out / "run.json").read_text())["configuration"]
     assert configuration["pairs"] == "auto" and configuration["ground"] == "drop"
+
+
+def test_pictures_are_drawn_for_every_job(tmp_path, scheduler):
+    data, _ = _write_sweeps(tmp_path / "frames")
+    out = tmp_path / "out"
+    command = ["run", str(data), "--pairs", "sweeps", "--pictures", "-q"]
+    assert main([*command, "--out", str(out), "--scheduler", scheduler]) == 0
+    pictures = sorted((out / "pictures").iterdir())
+    assert [p.name for p in pictures] == ["frame0__frame1.png", "frame1__frame2.png"]
+    for picture in pictures:
+        assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # Pictures change no result: the same command without them resumes every job.
+    summary = run_dataset(dataset_jobs(data, pairs="sweeps"), None, out, scheduler=scheduler)
+    assert summary["resumed"].all()

@@ -104,12 +104,24 @@ LAYOUTS = ("auto", "argoverse2", "sequence", "frames", "correspondences")
 PAIRS = ("auto", "sweeps", "truth", "aligned")
 GROUND = ("auto", "keep", "drop")
 # What an 'mmreg run' folder holds at its top (jobs/ holds <job>.npz files).
-RUN_FILES = ("run.json", "summary.parquet", "summary.csv", "jobs", "av2_scene_flow")
+RUN_FILES = (
+    "run.json",
+    "summary.parquet",
+    "summary.csv",
+    "jobs",
+    "av2_scene_flow",
+    "pictures",
+)
 
 
 def add_arguments(parser):
     parser.add_argument(
         "dataset", metavar="DATASET", help="a dataset folder or a ROS bag (see above)"
+    )
+    parser.add_argument(
+        "--pictures",
+        action="store_true",
+        help="also draw every job's result (a LiDAR sweep from above) into OUT/pictures/",
     )
     parser.add_argument(
         "--out",
@@ -327,7 +339,7 @@ def run(args):
     resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
     try:
         if args.overwrite:  # only result files, checked above
-            for folder in ("jobs", "av2_scene_flow"):
+            for folder in ("jobs", "av2_scene_flow", "pictures"):
                 if (out / folder).is_dir():
                     shutil.rmtree(out / folder)
         out.mkdir(parents=True, exist_ok=True)
@@ -344,6 +356,7 @@ def run(args):
         scheduler=args.scheduler,
         n_workers=args.n_workers,
         progress=not args.quiet,
+        pictures=args.pictures,
     )
     elapsed = time.perf_counter() - start
     failed = summary[summary["status"] != "done"]
