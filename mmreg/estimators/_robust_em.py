@@ -436,12 +436,13 @@ def robust_multi_model_em(
             anchored = _holds_its_members(static, own, new)
             found = []
             if run["proposals"]:
+                smallest = float(np.min(models.sigmas)) if len(kept) else sigma_floor
                 found = propose_clusters(
                     a,
                     b,
                     _unexplained(a, b, new, static, models, noise_scale, confidence),
                     tau if tau is not None else np.inf,
-                    float(np.min(models.sigmas)) if len(kept) else sigma_floor,
+                    smallest,
                     log_outlier,
                     n,
                     rng,
@@ -454,6 +455,9 @@ def robust_multi_model_em(
                     confidence=confidence,
                     reference=reference if anchored else None,
                     per_cluster=sweep,
+                    # Without scales of their own, the next M-step holds a proposal to
+                    # the clusters' shared scale: it may take no wider one.
+                    max_scale=None if own_scales else smallest,
                 )
             for group in found:
                 new[group] = len(kept)

@@ -1273,6 +1273,7 @@ def propose_clusters(
     max_noise_ratio=0.1,
     n_scales=7,
     per_cluster=True,
+    max_scale=None,
 ):
     """New clusters from groups of unexplained correspondences that share a motion.
 
@@ -1284,6 +1285,12 @@ def propose_clusters(
     the points relative to the ``reference`` motion (the static world's; the identity if
     None): a flow network errs in proportion to the motion, so a moving object's flow is
     noisier than the static world's, but never by more than a fraction of its motion.
+    Nor beyond ``max_scale``, the widest scale the next M-step lets a new cluster keep
+    (the clusters' shared scale when they have none of their own): a proposal must be a
+    motion its members follow at the scale they will be judged by. Found at a wider one,
+    say one object's wrong correspondences (scattered a metre about its motion) taken
+    for an object of their own, the M-step trims every member of it, its motion is
+    fitted on nothing, and the proposals bring it back at every iteration.
     The (hypothesis, scale) whose inliers (residual within the ``confidence`` quantile
     of ``(sigma g_i)^2 chi2_d``) gain most log-likelihood over the outlier component
     wins (the noise scale is searched, as MAGSAC marginalises it) and is refitted on
@@ -1321,6 +1328,7 @@ def propose_clusters(
     chi2_limit = chi2.ppf(confidence, d)
     price = 0.5 * (motion_parameters(d) + 1) * np.log(n_total)
     grid = scale * 2.0 ** np.arange(n_scales)
+    widest = np.inf if max_scale is None else max(max_scale, scale)
     groups = np.flatnonzero(counts >= max(min_cluster_size, size + 1))
     n_tests = max(len(groups) * n_hypotheses, 1)
     # Volume of a d-ball of radius 1.
@@ -1356,7 +1364,7 @@ def propose_clusters(
             best, sigma = _best_hypothesis(
                 sq,
                 grid,
-                grid <= np.maximum(scale, max_noise_ratio * motion)[:, None],
+                grid <= np.minimum(np.maximum(scale, max_noise_ratio * motion), widest)[:, None],
                 d,
                 chi2_limit,
                 np.log(g),
