@@ -11,7 +11,6 @@ too.
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from sklearn.exceptions import ConvergenceWarning
 
 from mmreg import MultiModelRegistration
 from mmreg.metrics import objects_found
@@ -92,10 +91,12 @@ def test_without_the_static_world_step_the_islands_stay_apart():
     est = MultiModelRegistration(
         tau=5.0, variant="sweep", random_state=0, skip_steps=("static_world",)
     )
-    with pytest.warns(ConvergenceWarning):  # without a static world the pieces never settle
-        est.fit(X)
+    est.fit(X)
     assert est.static_cluster_ == -1
     assert est.n_clusters_ >= 12
+    # Without a static world the clusters share one noise scale, and the proposals take
+    # none wider: the loop settles instead of proposing the noisy cars again and again.
+    assert est.n_iter_ < est.max_iter
 
 
 def test_two_far_apart_objects_with_one_motion_stay_apart_without_a_majority():
