@@ -399,13 +399,14 @@ def add_arguments(parser):
     )
 
 
-def _check_size(points, args):
-    if len(points) < args.min_cluster_size:
+def _check_size(values, args, what="points"):
+    """values unchanged, or a CLIError when INPUT gives fewer than --min-cluster-size."""
+    if len(values) < args.min_cluster_size:
         raise CLIError(
-            f"{args.input}: {len(points)} points, fewer than --min-cluster-size "
+            f"{args.input}: {len(values)} {what}, fewer than --min-cluster-size "
             f"{args.min_cluster_size}: no cluster is possible"
         )
-    return points
+    return values
 
 
 def _read_sequence_input(args, other):
@@ -466,13 +467,7 @@ def read_input(args):
                     "size and order use --sweep"
                 ) from None
             raise
-    X = check_correspondences(X, args.input)
-    if len(X) < args.min_cluster_size:
-        raise CLIError(
-            f"{args.input}: {len(X)} correspondences, fewer than --min-cluster-size "
-            f"{args.min_cluster_size}: no cluster is possible"
-        )
-    return X
+    return _check_size(check_correspondences(X, args.input), args, "correspondences")
 
 
 def read_masks(path, n):
