@@ -17,7 +17,9 @@ time (ms, median of ``--repeats`` runs, the methods interleaved), for
   1 m correspondences; VGICP on 1 m voxels), from the identity;
 - ``KISS-ICP``: its pipeline's pieces on two sweeps (the second sweep is the map, voxels of
   1 m = max range / 100, the first frame's threshold of 2 m);
-- ``mmreg ego_motion``: ``mmreg._ego_motion.ego_motion(a, sweep, scale=5)``.
+- ``mmreg ego_motion``: ``mmreg._ego_motion.ego_motion(a, sweep, scale=5)``;
+- ``mmreg ego_motion, robust``: the same with ``robust=True`` (a last GICP stage
+  reweighted by a kernel of the Mahalanobis distances).
 
 A second table asks whether the per-object refinement should move to small_gicp too: the
 moving cars of ``av2_api_7fab2350`` (150 points or more), each from 8 starts off its true
@@ -60,6 +62,7 @@ def _matrix(rotation, translation):
 
 def old_icp(a, sweep):
     est = SweepRegistration(random_state=0)
+    est._resolve_lengths()  # fit's first step: max_distance_ and the other lengths
     tree = cKDTree(sweep)
     context = (sweep, tree, SurfaceNormals(sweep, tree, 10), np.random.RandomState(0), None)
     (rotation, translation), _ = est._ego_motion(a, context)
@@ -100,12 +103,18 @@ def new(a, sweep):
     return _matrix(rotation, translation)
 
 
+def robust(a, sweep):
+    rotation, translation, _ = ego_motion(a, sweep, scale=SCALE, robust=True)
+    return _matrix(rotation, translation)
+
+
 METHODS = {
     "mmreg ICP (old)": old_icp,
     "small_gicp GICP": gicp,
     "small_gicp VGICP": lambda a, b: gicp(a, b, "VGICP"),
     "KISS-ICP": kiss,
     "mmreg ego_motion": new,
+    "mmreg ego_motion, robust": robust,
 }
 
 
@@ -289,7 +298,7 @@ def reach_rows(root):
         sweep, further = _further(scene.pc2, shift, yaw)
         ends = scene.b[static] @ further[:3, :3].T + further[:3, 3]
         truth = further @ scene.transforms[0]
-        for method in ("small_gicp GICP", "mmreg ego_motion"):
+        for method in ("small_gicp GICP", "mmreg ego_motion", "mmreg ego_motion, robust"):
             motion = METHODS[method](scene.a, sweep)
             angle, shift_error, epe = errors(motion, truth, scene.a, (static, ends))
             rows.append((shift, yaw, method, angle, shift_error, epe))
