@@ -11,6 +11,9 @@ centred and divided by it before the engine sees them (small_gicp's convergence 
 its optimiser's damping are in absolute units), so scaled inputs give the same motion, its
 translation scaled (to 1e-9 for scales from 1e-3 to 1e3: tests/test_ego_motion.py).
 
+With ``robust=True`` a last stage reweights the fine voxels' matches by a kernel of
+their Mahalanobis distances (small_gicp has none), so that moving objects lose their pull.
+
 A displacement of up to ``max_displacement`` is found from the identity by halving the
 correspondence distance from ``max_displacement`` down to the fine one, each stage on a
 voxel grid a quarter of its reach, started from the last. The ground is kept: it holds
@@ -21,6 +24,7 @@ import numbers
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from mmreg._icp import SurfaceNormals
 
@@ -48,6 +52,17 @@ _NORMAL_NEIGHBOURS = 10
 _MIN_FLATNESS = 0.2
 # GICP needs at least this many points on each side (a covariance needs 3, a motion 6).
 _MIN_POINTS = 10
+# The robust fine stage: a Geman-McClure kernel this many robust scales of the
+# Mahalanobis distances wide, annealed from _START_WIDTH by this factor a step, with at
+# least _MIN_ANNEAL steps and at most _ROBUST_ITER; a floor on the scale (distances of
+# noiseless planes are 0) and the step length (radians, scales) that ends it.
+_KERNEL = 3.0
+_START_WIDTH = 10.0
+_ANNEAL = 0.7
+_MIN_ANNEAL = 10
+_ROBUST_ITER = 100
+_DISTANCE_FLOOR = 1e-3
+_ROBUST_TOL = 1e-7
 # small_gicp's voxel grid drops points more than 2**20 voxels from the origin.
 _MAX_VOXELS = 2**20
 
@@ -110,8 +125,63 @@ def _residual_scale(points, sweep, rotation, translation, reach, normals):
     return _MAD_TO_SIGMA * float(np.median(np.abs(residual)))
 
 
+def _skew(vectors):
+    """Cross-product matrices ``[v]x`` of ``(n, 3)`` vectors."""
+    out = np.zeros((len(vectors), 3, 3))
+    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -vectors[:, 2], vectors[:, 1], -vectors[:, 0]
+    return out - out.transpose(0, 2, 1)
+
+
+def _robust_gicp(source, source_covs, target, target_covs, motion, reach):
+    """GICP with a Geman-McClure kernel on the Mahalanobis distances, from a close start.
+
+    The kernel is ``_KERNEL`` robust scales (1.4826 MAD of the distances) wide, annealed
+    down from ``_START_WIDTH``, so that the voxels off the static world's surfaces (moving
+    objects) lose their pull instead of dragging the motion (small_gicp has no kernel).
+    Works in units of ``scale``; returns the 4 x 4 motion.
+    """
+    tree = cKDTree(target)
+    rotation, translation = motion[:3, :3].copy(), motion[:3, 3].copy()
+    identity = np.broadcast_to(np.eye(3), (len(source), 3, 3))
+    for iteration in range(_ROBUST_ITER):
+        moved = source @ rotation.T + translation
+        distance, nearest = tree.query(moved, distance_upper_bound=reach)
+        matched = np.flatnonzero(distance <= reach)
+        if len(matched) < _MIN_POINTS:
+            break
+        q, j = moved[matched], nearest[matched]
+        residual = target[j] - q
+        information = np.linalg.inv(target_covs[j] + rotation @ source_covs[matched] @ rotation.T)
+        weighted = np.einsum("nij,nj->ni", information, residual)
+        mahalanobis = np.sqrt(np.maximum(np.einsum("ni,ni->n", residual, weighted), 0.0))
+        sigma = max(_MAD_TO_SIGMA * float(np.median(mahalanobis)), _DISTANCE_FLOOR)
+        width = max(_KERNEL * sigma, _ANNEAL**iteration * _START_WIDTH)
+        weight = 1.0 / (1.0 + (mahalanobis / width) ** 2) ** 2
+        # residual = y - (R x + t); a left step (omega, v) changes it by [q]x omega - v.
+        jacobian = np.concatenate([_skew(q), -identity[: len(q)]], axis=2)
+        jt_info = np.einsum("nji,njk->nik", jacobian, information) * weight[:, None, None]
+        hessian = np.einsum("nik,nkl->il", jt_info, jacobian)
+        gradient = np.einsum("nik,nk->i", jt_info, residual)
+        step = -np.linalg.solve(hessian + 1e-12 * np.trace(hessian) * np.eye(6), gradient)
+        turn = Rotation.from_rotvec(step[:3]).as_matrix()
+        rotation, translation = turn @ rotation, turn @ translation + step[3:]
+        if iteration >= _MIN_ANNEAL and np.linalg.norm(step) < _ROBUST_TOL:
+            break
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rotation, translation
+    return out
+
+
 def ego_motion(
-    points, sweep, *, scale, max_displacement=None, max_iter=30, workers=1, sweep_normals=None
+    points,
+    sweep,
+    *,
+    scale,
+    max_displacement=None,
+    max_iter=30,
+    workers=1,
+    sweep_normals=None,
+    robust=False,
 ):
     """The rigid motion that carries one raw sweep onto the next, found from the identity.
 
@@ -137,6 +207,13 @@ def ego_motion(
         ``mmreg._icp.SurfaceNormals(sweep, cKDTree(sweep), 10)`` where the caller keeps
         one (``SweepRegistration`` does): the residual scale then reuses its KD-tree and
         normals. None: built here.
+    robust : bool, default=False
+        End with a robust GICP stage on the fine voxels (a Geman-McClure kernel three
+        robust scales of the Mahalanobis distances wide, annealed from far wider), so
+        that moving objects do not drag the motion. On boxes of which a third drive off
+        it recovers the ego motion to 0.4 mm where GICP alone is 9 cm off; on the real
+        Argoverse 2 pairs its rotation is 0.04-0.06 degrees off against GICP's
+        0.01-0.04 (``benchmarks/results/ego_motion.md``).
 
     Returns
     -------
@@ -259,6 +336,16 @@ def ego_motion(
             translation_epsilon=tolerance,
         )
         motion = np.asarray(result.T_target_source)
+    if robust:
+        (target, _), (source, _) = fine
+        motion = _robust_gicp(
+            fine_points[1],
+            np.asarray(source.covs())[:, :3, :3],
+            fine_points[0],
+            np.asarray(target.covs())[:, :3, :3],
+            motion,
+            _FINE_REACH,
+        )
     rotation = motion[:3, :3].copy()
     # Back from the centred, scaled frame: (y - o) / s = R (x - o) / s + t'.
     translation = scale * motion[:3, 3] + origin - rotation @ origin
