@@ -51,3 +51,13 @@ def noiseless_scene():
 @pytest.fixture
 def noisy_scene():
     return make_scene(n_objects=4, n_points=1200, noise=0.01, noise_type="uniform", random_state=1)
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """An in-process Dask cluster of one worker: jobs run one after the other."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
+        yield cluster.scheduler_address

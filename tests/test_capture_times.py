@@ -122,15 +122,6 @@ def pair(log):
     return pair
 
 
-@pytest.fixture(scope="module")
-def scheduler():
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
-    ) as cluster:
-        yield cluster.scheduler_address
-
-
 # --------------------------------------------------------------------------- the runner
 class _NoTimes(SweepRegistration):
     """A sweep estimator whose fit takes the sweep but no capture times."""

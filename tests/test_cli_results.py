@@ -5,36 +5,14 @@ import shutil
 
 import numpy as np
 import pytest
+from _fake_av2 import box_surface, write_log
 
 from mmreg import io as mmio
 from mmreg.cli import main
-from mmreg.datasets import write_argoverse2_log
 from mmreg.metrics import ground_truth_poses, rotation_error, translation_error
 from mmreg.runner import dataset_jobs
 
 distributed = pytest.importorskip("distributed")
-
-
-@pytest.fixture(scope="module")
-def scheduler():
-    with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
-    ) as cluster:
-        yield cluster.scheduler_address
-
-
-def _pose(x, y=0.0, z=0.0):
-    T = np.eye(4)
-    T[:3, 3] = x, y, z
-    return T
-
-
-def _box_surface(rng, n, low, high):
-    low, high = np.asarray(low, float), np.asarray(high, float)
-    points = rng.uniform(low, high, (n, 3))
-    face = rng.integers(0, 3, n)
-    points[np.arange(n), face] = np.where(rng.integers(0, 2, n), high[face], low[face])
-    return points
 
 
 def _write_frames(folder):
@@ -46,31 +24,6 @@ def _write_frames(folder):
     for k in range(3):
         np.save(folder / f"frame{k}.npy", np.vstack([block, box + [0.5 * k, 0, 0]]))
     return folder, np.r_[np.zeros(150, int), np.ones(80, int)]
-
-
-def _write_sweep_log(folder):
-    """Three sweeps from a car driving 1 m per sweep: road, building, a car 1.5 m/sweep."""
-    rng = np.random.default_rng(2)
-    stamps = [315966265259836000 + k * 100_000_000 for k in range(3)]
-    sweeps, cuboids = {}, []
-    sizes = [(200, 250, 150), (180, 280, 130), (220, 230, 160)]
-    for k, (n_road, n_building, n_car) in enumerate(sizes):
-        road = np.c_[rng.uniform(-20, 20, (n_road, 2)), np.zeros(n_road)]
-        building = _box_surface(rng, n_building, [-6, -8, 0.5], [-2, -4, 4]) - [k, 0, 0]
-        car = _box_surface(rng, n_car, [-2, -0.8, -0.5], [2, 0.8, 0.5]) + [8 + 0.5 * k, 3, 1]
-        sweeps[stamps[k]] = np.vstack([road, building, car])
-        pose = _pose(8.0 + 0.5 * k, 3, 1.0)
-        cuboids.append(
-            dict(
-                timestamp_ns=stamps[k],
-                track_uuid="car-1",
-                category="REGULAR_VEHICLE",
-                size=(4.4, 1.8, 1.5),
-                pose=pose,
-            )
-        )
-    ego = {t: _pose(1.0 * k) for k, t in enumerate(stamps)}
-    return write_argoverse2_log(folder, sweeps, ego, cuboids)
 
 
 def _json(capsys, *command):
@@ -110,7 +63,7 @@ def test_view_and_evaluate_a_run_of_frames(tmp_path, scheduler, capsys):
 
 
 def test_evaluate_every_job_of_a_sweep_run_against_its_datasets_truth(tmp_path, scheduler, capsys):
-    log = _write_sweep_log(tmp_path / "log")
+    log = write_log(tmp_path / "log")
     out = tmp_path / "run"
     command = ["run", str(log), "--pairs", "sweeps", "--out", str(out), "--scheduler", scheduler]
     assert main([*command, "-q"]) == 0
@@ -161,13 +114,13 @@ def test_evaluate_every_job_of_a_sweep_run_against_its_datasets_truth(tmp_path, 
 
 def test_sweep_result_with_labels_only_truth_measures_no_error(tmp_path, capsys):
     rng = np.random.default_rng(3)
-    still = _box_surface(rng, 300, [0, 0, 0], [4, 4, 3])
-    moving = _box_surface(rng, 150, [8, 0, 0], [10, 1, 1])
+    still = box_surface(rng, 300, [0, 0, 0], [4, 4, 3])
+    moving = box_surface(rng, 150, [8, 0, 0], [10, 1, 1])
     first = np.vstack([still, moving])
     second = np.vstack(
         [
-            _box_surface(rng, 280, [0, 0, 0], [4, 4, 3]),
-            _box_surface(rng, 160, [9, 0, 0], [11, 1, 1]),
+            box_surface(rng, 280, [0, 0, 0], [4, 4, 3]),
+            box_surface(rng, 160, [9, 0, 0], [11, 1, 1]),
         ]
     )
     mmio.write_point_cloud(tmp_path / "s0.ply", first)

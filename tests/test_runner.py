@@ -25,15 +25,6 @@ distributed = pytest.importorskip("distributed")
 ARRAYS = ("labels", "rotations", "translations", "sigmas", "flow")
 
 
-@pytest.fixture(scope="module")
-def scheduler():
-    # One in-process worker: the jobs run one after the other, as in a plain loop.
-    with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
-    ) as cluster:
-        yield cluster.scheduler_address
-
-
 def _estimator():
     return MultiModelRegistration(tau=1.0, random_state=0)
 

@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from _fake_av2 import SIZES, STAMPS, box_surface, write_log
 
 from mmreg import MultiModelRegistration, SweepRegistration
 from mmreg.cli import main
-from mmreg.datasets import load_argoverse2, write_argoverse2_log
+from mmreg.datasets import load_argoverse2
 from mmreg.datasets._argoverse2 import _read_points
 from mmreg.runner import (
     SCENE_FLOW_FOLDER,
@@ -29,67 +30,6 @@ from mmreg.runner import (
 )
 
 distributed = pytest.importorskip("distributed")
-
-STAMPS = [315966265259836000 + k * 100_000_000 for k in range(3)]
-SIZES = [(200, 250, 150), (180, 280, 130), (220, 230, 160)]  # road, building, car
-
-
-@pytest.fixture(scope="module")
-def scheduler():
-    with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
-    ) as cluster:
-        yield cluster.scheduler_address
-
-
-def _pose(x, y=0.0, z=0.0):
-    T = np.eye(4)
-    T[:3, 3] = x, y, z
-    return T
-
-
-def _box_surface(rng, n, low, high):
-    """``n`` points on the faces of the box [low, high]."""
-    low, high = np.asarray(low, float), np.asarray(high, float)
-    points = rng.uniform(low, high, (n, 3))
-    face = rng.integers(0, 3, n)
-    points[np.arange(n), face] = np.where(rng.integers(0, 2, n), high[face], low[face])
-    return points
-
-
-def _sweeps(seed=2):
-    """Three sweeps seen from a car driving 1 m per sweep: a road (ground, the first rows),
-    a building and a car driving 1.5 m per sweep (0.5 m in the ego frame), each sweep
-    sampled anew."""
-    rng = np.random.default_rng(seed)
-    sweeps = {}
-    for k, (n_road, n_building, n_car) in enumerate(SIZES):
-        road = np.c_[rng.uniform(-20, 20, (n_road, 2)), np.zeros(n_road)]
-        building = _box_surface(rng, n_building, [-6, -8, 0.5], [-2, -4, 4]) - [k, 0, 0]
-        car = _box_surface(rng, n_car, [-2, -0.8, -0.5], [2, 0.8, 0.5]) + [8 + 0.5 * k, 3, 1]
-        sweeps[STAMPS[k]] = np.vstack([road, building, car])
-    return sweeps
-
-
-def _write_log(folder, *, annotations=True, map_=True, seed=2, annotated=STAMPS):
-    cuboids = [
-        dict(
-            timestamp_ns=t,
-            track_uuid="car-1",
-            category="REGULAR_VEHICLE",
-            size=(4.4, 1.8, 1.5),
-            pose=_pose(8.0 + 0.5 * k, 3, 1.0),
-        )
-        for k, t in enumerate(STAMPS)
-        if t in annotated
-    ]
-    ego = {t: _pose(1.0 * k) for k, t in enumerate(STAMPS)}
-    log = write_argoverse2_log(folder, _sweeps(seed), ego, cuboids)
-    if not annotations:
-        (log / "annotations.feather").unlink()
-    if not map_:
-        shutil.rmtree(log / "map")
-    return log
 
 
 def _cli_estimator():
@@ -130,7 +70,7 @@ def _check_challenge_file(path, points, indices, model):
 def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
     tmp_path, scheduler, monkeypatch, capsys
 ):
-    log = _write_log(tmp_path / "data" / "log", annotations=False, map_=False)
+    log = write_log(tmp_path / "data" / "log", annotations=False, map_=False)
     jobs = dataset_jobs(log)
     assert [job.name for job in jobs] == [str(t) for t in STAMPS[:2]]  # 3 sweeps, 2 pairs
     data = jobs[0].load()
@@ -189,7 +129,7 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
 
 
 def test_dropped_ground_rows_move_with_the_static_world_in_the_challenge_file(tmp_path, scheduler):
-    log = _write_log(tmp_path / "log", annotations=False)  # a map: the ground is known
+    log = write_log(tmp_path / "log", annotations=False)  # a map: the ground is known
     out = tmp_path / "out"
     command = ["run", str(log), "--ground", "drop", "--scheduler", scheduler, "-q"]
     assert main([*command, "--out", str(out)]) == 0
@@ -210,7 +150,7 @@ def test_dropped_ground_rows_move_with_the_static_world_in_the_challenge_file(tm
 
 
 def test_map_ground_masks_go_to_a_fit_that_names_them(tmp_path):
-    log = _write_log(tmp_path / "log")
+    log = write_log(tmp_path / "log")
     seen = {}
 
     class Grounded(SweepRegistration):
@@ -251,8 +191,8 @@ def test_map_ground_masks_go_to_a_fit_that_names_them(tmp_path):
 
 def test_split_with_broken_logs_gives_failed_rows_and_the_others_go_on(tmp_path, scheduler, capsys):
     split = tmp_path / "split"
-    _write_log(split / "a", annotations=False, map_=False)
-    torn = _write_log(split / "b", map_=False)
+    write_log(split / "a", annotations=False, map_=False)
+    torn = write_log(split / "b", map_=False)
     sweep = torn / "sensors" / "lidar" / f"{STAMPS[2]}.feather"
     sweep.write_bytes(sweep.read_bytes()[:100])  # truncated: the pair (1, 2) cannot load
     (split / "c" / "sensors" / "lidar").mkdir(parents=True)  # no sweep at all
@@ -275,7 +215,7 @@ def test_split_with_broken_logs_gives_failed_rows_and_the_others_go_on(tmp_path,
 
 
 def test_a_log_annotated_at_some_sweeps_is_scored_where_both_are(tmp_path):
-    log = _write_log(tmp_path / "log", annotated=STAMPS[:2])
+    log = write_log(tmp_path / "log", annotated=STAMPS[:2])
     first, second = (job.load() for job in dataset_jobs(log))
     assert {"labels_true", "flow_true"} <= set(first)
     assert not {"labels_true", "flow_true"} & set(second)
@@ -287,7 +227,7 @@ def test_a_log_annotated_at_some_sweeps_is_scored_where_both_are(tmp_path):
 
 # --------------------------------------------------------------------------- --pairs truth
 def test_truth_fed_jobs_are_marked(tmp_path, scheduler, capsys):
-    log = _write_log(tmp_path / "log")
+    log = write_log(tmp_path / "log")
     out = tmp_path / "out"
     assert (
         main(["run", str(log), "--pairs", "truth", "--out", str(out), "--scheduler", scheduler])
@@ -304,7 +244,7 @@ def test_truth_fed_jobs_are_marked(tmp_path, scheduler, capsys):
     assert summary["ground"].tolist() == ["dropped", "dropped"]
     np.testing.assert_array_equal(arrays["labels"], expected.fit(scene.X[~scene.ground]).labels_)
     # Without annotations there is no truth to feed: a failed row per pair.
-    bare = _write_log(tmp_path / "bare", annotations=False)
+    bare = write_log(tmp_path / "bare", annotations=False)
     command = ["run", str(bare), "--pairs", "truth", "--scheduler", scheduler, "-q"]
     assert main([*command, "--out", str(tmp_path / "bare-out")]) == 1
     assert "--pairs truth needs the annotations" in capsys.readouterr().err
@@ -320,7 +260,7 @@ def _write_flow(folder, log, bias=0.7):
 
 
 def test_a_networks_flow_is_refined_on_the_next_sweep(tmp_path, scheduler, capsys):
-    log = _write_log(tmp_path / "log")
+    log = write_log(tmp_path / "log")
     flows = _write_flow(tmp_path / "zeroflow" / "log", log)
     out = tmp_path / "out"
     command = ["run", str(log), "--scheduler", scheduler, "-q", "--flow"]
@@ -370,8 +310,8 @@ def _write_kitti(folder):
     (folder / "velodyne").mkdir(parents=True)
     sizes = [(250, 150), (220, 170), (270, 130)]
     for k, (n_still, n_moving) in enumerate(sizes):
-        still = _box_surface(rng, n_still, [0, 0, 0], [3, 3, 2])
-        moving = _box_surface(rng, n_moving, [6, 0, 0], [8, 2, 1.5]) + [0.5 * k, 0, 0]
+        still = box_surface(rng, n_still, [0, 0, 0], [3, 3, 2])
+        moving = box_surface(rng, n_moving, [6, 0, 0], [8, 2, 1.5]) + [0.5 * k, 0, 0]
         points = np.vstack([still, moving])
         scan = np.c_[points, np.full(len(points), 0.5)].astype(np.float32)
         scan.tofile(folder / "velodyne" / f"{k:06d}.bin")
@@ -512,8 +452,8 @@ def test_ctrl_c_to_the_process_group_is_one_line_and_exit_130(tmp_path):
     data.mkdir()
     rng = np.random.default_rng(0)
     for k in range(12):
-        still = _box_surface(rng, 3000, [0, 0, 0], [10, 10, 4])
-        moving = _box_surface(rng, 1500, [12, 0, 0], [16, 2, 1.5]) + [0.5 * k, 0, 0]
+        still = box_surface(rng, 3000, [0, 0, 0], [10, 10, 4])
+        moving = box_surface(rng, 1500, [12, 0, 0], [16, 2, 1.5]) + [0.5 * k, 0, 0]
         np.save(data / f"f{k:02d}.npy", np.vstack([still, moving]))
     out = tmp_path / "out"
     command = [sys.executable, "-m", "mmreg.cli", "run", str(data), "--pairs", "sweeps"]
