@@ -65,6 +65,14 @@ def test_tau_default_is_five_for_sweeps_and_one_and_a_half_for_correspondences(
     assert json.loads((tmp_path / "b" / "run.json").read_text())["estimator"]["tau"] == 1.5
     _register(capsys, tmp_path / "pairs.npy", "--out", tmp_path / "c", "-q", "--tau", "2")
     assert json.loads((tmp_path / "c" / "run.json").read_text())["estimator"]["tau"] == 2.0
+    # A LiDAR file is a sweep in metres, with or without --sweep (here with a flow).
+    _, first, _ = sweeps
+    kitti = np.c_[first, np.zeros(len(first))].astype(np.float32)  # x y z reflectance
+    kitti.tofile(tmp_path / "000000.bin")
+    np.save(tmp_path / "flow.npy", np.tile([0.5, 0.0, 0.0], (len(first), 1)))
+    flow = ["--flow", tmp_path / "flow.npy"]
+    _register(capsys, tmp_path / "000000.bin", *flow, "--out", tmp_path / "d", "-q")
+    assert json.loads((tmp_path / "d" / "run.json").read_text())["estimator"]["tau"] == 5.0
     for command in ("register", "run"):
         with pytest.raises(SystemExit):
             main([command, "--help"])

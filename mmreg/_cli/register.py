@@ -153,9 +153,19 @@ def _voxel_size(text):
 TAU_SWEEPS = 5.0
 TAU_CORRESPONDENCES = 1.5
 TAU_RULE = (
-    f"'auto': {TAU_SWEEPS:g} for LiDAR sweeps (register --sweep; run --pairs sweeps or "
-    f"an Argoverse 2 log), else {TAU_CORRESPONDENCES:g} (correspondences, the paper's)"
+    f"'auto': {TAU_SWEEPS:g} for LiDAR sweeps (register --sweep or a LiDAR file or log as "
+    f"INPUT; run --pairs sweeps or a LiDAR log), else {TAU_CORRESPONDENCES:g} "
+    "(correspondences, the paper's)"
 )
+
+
+def _is_lidar_input(args):
+    """Whether INPUT is a LiDAR sweep by its format (KITTI, nuScenes, Argoverse 2, a bag or
+    a sequence), so that its points are in metres whatever else is given with it."""
+    from mmreg._lidar_files import lidar_kind
+
+    path = getattr(args, "input", None)
+    return path is not None and (lidar_kind(path) is not None or is_sequence(path))
 
 
 def resolve_tau(tau, sweeps):
@@ -645,7 +655,7 @@ def _fit(X, init, args, steps, sweep=None, timing=None):
         # fit ("auto" included) clusters its own sample.
         labels = init
     estimator = MultiModelRegistration(
-        tau=resolve_tau(args.tau, sweep is not None),
+        tau=resolve_tau(args.tau, sweep is not None or _is_lidar_input(args)),
         min_cluster_size=args.min_cluster_size,
         max_iter=args.max_iter,
         init=labels,
