@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _surfaces import area_weighted_box
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -33,23 +34,13 @@ BOXES = [
 ]
 
 
-def _box_surface(center, size, n, rng):
-    """``n`` points uniform on the surface of an axis-aligned box (area-weighted faces)."""
-    size = np.asarray(size)
-    areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]]).repeat(2)
-    face = rng.choice(6, n, p=areas / areas.sum())
-    points = rng.uniform(-0.5, 0.5, (n, 3))
-    points[np.arange(n), face // 2] = np.where(face % 2, 0.5, -0.5)
-    return points * size + center
-
-
 def courtyard(n, rng):
     """``n`` points drawn independently on the courtyard's surfaces."""
     area = [GROUND[0] * GROUND[1]]
     area += [2 * (s[0] * s[1] + s[1] * s[2] + s[0] * s[2]) for _, s in BOXES]
     counts = rng.multinomial(n, np.array(area) / np.sum(area))
     ground = rng.uniform(-0.5, 0.5, (counts[0], 3)) * [*GROUND, 0.0]
-    boxes = [_box_surface(c, s, k, rng) for (c, s), k in zip(BOXES, counts[1:], strict=True)]
+    boxes = [area_weighted_box(c, s, k, rng) for (c, s), k in zip(BOXES, counts[1:], strict=True)]
     return np.vstack([ground, *boxes])
 
 
@@ -195,8 +186,8 @@ def test_robust_stage_is_not_pulled_by_moving_objects():
     car_motions = [(np.eye(3), np.array([1.0, 0.2, 0.0])), (np.eye(3), np.array([0.1, 0.9, 0.0]))]
 
     def sample(k):
-        static = [_box_surface(c, s, 3000, rng) for c, s in boxes]
-        moving = [_box_surface(c, s, 2000, rng) for c, s in cars]
+        static = [area_weighted_box(c, s, 3000, rng) for c, s in boxes]
+        moving = [area_weighted_box(c, s, 2000, rng) for c, s in cars]
         if k:
             static = [p @ ego[0].T + ego[1] for p in static]
             moving = [

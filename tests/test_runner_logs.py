@@ -364,33 +364,9 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
     assert "--ground drop needs it" in capsys.readouterr().err
 
 
-def _pointcloud2(types, points, stamp_ns, times_ns):
-    """A sensor_msgs/PointCloud2 of float32 x, y, z and a uint32 per-point time ``t``."""
-    PointField = types["sensor_msgs/msg/PointField"]
-    fields = [PointField(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")]
-    fields.append(PointField(name="t", offset=12, datatype=6, count=1))  # Ouster style
-    record = np.zeros(len(points), [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", "<u4")])
-    for k, name in enumerate("xyz"):
-        record[name] = points[:, k]
-    record["t"] = times_ns
-    stamp = types["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
-    return types["sensor_msgs/msg/PointCloud2"](
-        header=types["std_msgs/msg/Header"](stamp=stamp, frame_id="lidar"),
-        height=1,
-        width=len(points),
-        fields=fields,
-        is_bigendian=False,
-        point_step=record.itemsize,
-        row_step=record.itemsize * len(points),
-        data=np.frombuffer(record.tobytes(), np.uint8),
-        is_dense=False,
-    )
-
-
 def test_ros2_bag_with_a_topic(tmp_path, scheduler, capsys):
     pytest.importorskip("rosbags")
-    from rosbags.rosbag2 import Writer
-    from rosbags.typesys import Stores, get_typestore
+    from test_sequences import write_bag
 
     sequence, sizes = _write_kitti(tmp_path / "scans")
     scans = [
@@ -398,19 +374,7 @@ def test_ros2_bag_with_a_topic(tmp_path, scheduler, capsys):
         for path in sorted((sequence / "velodyne").glob("*.bin"))
     ]
     scans[0][3] = np.nan  # no return: left out of the fit, its row kept in the indices
-    typestore = get_typestore(Stores.ROS2_HUMBLE)
-    msgtype = "sensor_msgs/msg/PointCloud2"
-    bag = tmp_path / "drive"
-    with Writer(bag, version=8) as writer:
-        topics = [writer.add_connection(t, msgtype, typestore=typestore) for t in ("/a", "/b")]
-        for k, points in enumerate(scans):
-            stamp = 1_700_000_000 * 10**9 + k * 100_000_000
-            times = np.zeros(len(points), np.uint32)  # every point at the stamp
-            message = typestore.serialize_cdr(
-                _pointcloud2(typestore.types, points, stamp, times), msgtype
-            )
-            for topic in topics:
-                writer.write(topic, stamp, message)
+    bag = write_bag(tmp_path / "drive", scans, topics=("/a", "/b"))
     out = tmp_path / "out"
     command = ["run", str(bag), "--scheduler", scheduler, "-q", "--out", str(out)]
     assert main(command) == 2  # two PointCloud2 topics: which one?

@@ -12,6 +12,7 @@ import re
 
 import numpy as np
 import pytest
+from _surfaces import area_weighted_box
 from scipy.spatial.transform import Rotation
 from sklearn.metrics import adjusted_rand_score
 
@@ -32,15 +33,6 @@ PERIOD_NS = 100_000_000
 
 
 # --------------------------------------------------------------------------- scenes
-def _surface(center, size, n, rng):
-    size = np.asarray(size)
-    areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]]).repeat(2)
-    face = rng.choice(6, n, p=areas / areas.sum())
-    points = rng.uniform(-0.5, 0.5, (n, 3))
-    points[np.arange(n), face // 2] = np.where(face % 2, 0.5, -0.5)
-    return points * size + center
-
-
 def _transform(rotvec, translation):
     T = np.eye(4)
     T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
@@ -58,8 +50,8 @@ def scene_frames(n_frames=3, random_state=0):
     rng = np.random.default_rng(random_state)
     static = [((0.0, 0.0, 1.5), (6.0, 2.0, 3.0)), ((0.0, 12.0, 2.0), (4.0, 4.0, 4.0))]
     static.append(((12.0, 6.0, 1.5), (2.0, 8.0, 3.0)))
-    parts = [_surface(c, s, 900, rng) for c, s in static]
-    parts.append(_surface((-9.0, 6.0, 0.75), (4.0, 2.0, 1.5), 700, rng))
+    parts = [area_weighted_box(c, s, 900, rng) for c, s in static]
+    parts.append(area_weighted_box((-9.0, 6.0, 0.75), (4.0, 2.0, 1.5), 700, rng))
     labels = np.repeat([0, 0, 0, 1], [900, 900, 900, 700])
     frames = [np.vstack(parts).astype(np.float32)]
     for _ in range(n_frames - 1):

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from _surfaces import area_weighted_box
 from sklearn.base import clone
 
 from mmreg import MultiModelRegistration, SweepRegistration
@@ -32,17 +33,6 @@ def _motions():
     return [ego, *cars]
 
 
-def _box_surface(center, size, n, rng):
-    """``n`` points uniform on the surface of an axis-aligned box (area-weighted faces)."""
-    size = np.asarray(size)
-    areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]]).repeat(2)
-    face = rng.choice(6, n, p=areas / areas.sum())
-    points = rng.uniform(-0.5, 0.5, (n, 3))
-    axis = face // 2
-    points[np.arange(n), axis] = np.where(face % 2, 0.5, -0.5)
-    return points * size + center
-
-
 def make_pair(n=4000, m=6000, random_state=0):
     """Two sweeps of the same box surfaces, sampled independently; the second moved."""
     rng = np.random.default_rng(random_state)
@@ -54,9 +44,9 @@ def make_pair(n=4000, m=6000, random_state=0):
     a_parts, labels, b_parts = [], [], []
     for k, (center, size) in enumerate(BOXES):
         R, t = motions[group[k]]
-        a_parts.append(_box_surface(center, size, counts_a[k], rng))
+        a_parts.append(area_weighted_box(center, size, counts_a[k], rng))
         labels.append(np.full(counts_a[k], group[k]))
-        b_parts.append(_box_surface(center, size, counts_b[k], rng) @ R.T + t)
+        b_parts.append(area_weighted_box(center, size, counts_b[k], rng) @ R.T + t)
     a, labels, sweep = np.vstack(a_parts), np.concatenate(labels), np.vstack(b_parts)
     rotations = np.stack([R for R, _ in motions])
     translations = np.stack([t for _, t in motions])

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from _surfaces import area_weighted_box
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -25,15 +26,6 @@ VELOCITY = np.array([8.0, 0.0, 0.0])  # m/s relative to the static world
 HEAD_TIMES = ((0.01, 0.06), (0.04, 0.09))
 
 
-def _box_surface(center, size, n, rng):
-    size = np.asarray(size)
-    areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]]).repeat(2)
-    face = rng.choice(6, n, p=areas / areas.sum())
-    points = rng.uniform(-0.5, 0.5, (n, 3))
-    points[np.arange(n), face // 2] = np.where(face % 2, 0.5, -0.5)
-    return points * size + center
-
-
 def _ego():
     return rotation_vectors_to_matrices(np.array([[0.0, 0.0, 0.01]]))[0], np.array([0.3, 0.0, 0.0])
 
@@ -48,11 +40,11 @@ def _sweep(rng, n_static, n_car, head_times, frame):
     R, t = (np.eye(3), np.zeros(3)) if frame is None else frame
     parts, times, labels = [], [], []
     for center, size in STATIC:
-        parts.append(_box_surface(center, size, n_static, rng))
+        parts.append(area_weighted_box(center, size, n_static, rng))
         times.append(rng.uniform(0.0, INTERVAL, n_static))
         labels.append(np.zeros(n_static, dtype=int))
     for tau in head_times:
-        car = _box_surface(CAR[0], CAR[1], n_car // 2, rng) + VELOCITY * (k * INTERVAL + tau)
+        car = area_weighted_box(CAR[0], CAR[1], n_car // 2, rng) + VELOCITY * (k * INTERVAL + tau)
         parts.append(car)
         times.append(np.full(n_car // 2, tau))
         labels.append(np.ones(n_car // 2, dtype=int))
