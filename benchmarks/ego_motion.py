@@ -17,7 +17,7 @@ time (ms, median of ``--repeats`` runs, the methods interleaved), for
   1 m correspondences; VGICP on 1 m voxels), from the identity;
 - ``KISS-ICP``: its pipeline's pieces on two sweeps (the second sweep is the map, voxels of
   1 m = max range / 100, the first frame's threshold of 2 m);
-- ``mmreg ego_motion``: ``mmreg._ego_motion.ego_motion(a, sweep, scale=5)``;
+- ``mmreg ego_motion``: ``mmreg.sweeps._ego_motion.ego_motion(a, sweep, scale=5)``;
 - ``mmreg ego_motion, robust``: the same with ``robust=True`` (a last GICP stage
   reweighted by a kernel of the Mahalanobis distances).
 
@@ -48,8 +48,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _lidar_street import street_sweeps  # noqa: E402
 
 from mmreg import SweepRegistration  # noqa: E402
-from mmreg._ego_motion import ego_motion  # noqa: E402
-from mmreg._icp import SurfaceNormals  # noqa: E402
+from mmreg.sweeps._ego_motion import ego_motion  # noqa: E402
+from mmreg.sweeps._icp import SurfaceNormals  # noqa: E402
 
 SCALE = 5.0  # tau for LiDAR in metres
 
@@ -219,7 +219,7 @@ def object_rows(root, n_starts=8, min_points=150):
     """Rows of the object-refinement table (empty when the scene is absent)."""
     import small_gicp
 
-    from mmreg._icp import multi_body_icp, rotation_vectors_to_matrices
+    from mmreg.sweeps._icp import multi_body_icp, rotation_vectors_to_matrices
 
     loader = _loader(root)
     if loader is None or "av2_api_7fab2350" not in loader[0](root):

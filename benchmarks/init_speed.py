@@ -45,8 +45,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import mmreg.init._euclidean as current
-from mmreg._neighbors import NeighbourTable
-from mmreg._voxels import voxel_sample
+from mmreg._array.neighbors import NeighbourTable
+from mmreg._array.voxels import voxel_sample
 from mmreg.datasets import make_flying_things, make_scene, make_street
 
 TAU = 1.5  # MultiModelRegistration's default gate, the default init's max_radius

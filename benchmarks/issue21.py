@@ -12,7 +12,7 @@ that size, what any method pays there:
 ``pass_s``  one pass over the correspondences: the squared residual ``|R a + t - b|^2`` of
             every row under one motion (what one E-step costs per motion);
 ``table_s`` (Table I row) the default's own neighbour pass: the ``k = 16`` nearest
-            neighbours of every a-point (``mmreg._neighbors.NeighbourTable``), which its
+            neighbours of every a-point (``mmreg._array.neighbors.NeighbourTable``), which its
             boundary-layers step reads;
 
 medians of as many repeats as the row's timing. The rows, with the issue's "today"
@@ -112,7 +112,7 @@ def floors(X, repeats, table=False):
     ``table``: also the default's k = 16 neighbour table."""
     from scipy.spatial import cKDTree
 
-    from mmreg._neighbors import NeighbourTable
+    from mmreg._array.neighbors import NeighbourTable
 
     a = np.ascontiguousarray(X[:, :3])
     b = np.ascontiguousarray(X[:, 3:])

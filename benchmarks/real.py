@@ -262,12 +262,12 @@ def robust_steps():
     from mmreg import MultiModelRegistration
 
     try:
-        from mmreg.estimators import _robust_em
+        from mmreg.em import _robust as _robust_em
     except ImportError as exc:  # pragma: no cover - the module exists today
-        return None, f"mmreg.estimators._robust_em cannot be imported ({exc})"
+        return None, f"mmreg.em._robust cannot be imported ({exc})"
     steps = getattr(_robust_em, "ROBUST_STEPS", None)
     if steps is None:
-        return None, "mmreg.estimators._robust_em has no ROBUST_STEPS"
+        return None, "mmreg.em._robust has no ROBUST_STEPS"
     if "skip_steps" not in MultiModelRegistration().get_params():
         return None, "MultiModelRegistration has no skip_steps parameter"
     return tuple(steps), ""

@@ -49,8 +49,8 @@ import scipy
 
 import mmreg
 from mmreg.datasets import make_scene
+from mmreg.em._paper import default_sigma_floor
 from mmreg.estimators import MultiModelRegistration, multi_model_em
-from mmreg.estimators._em import default_sigma_floor
 from mmreg.metrics import iou_score
 
 HERE = Path(__file__).resolve().parent
@@ -77,7 +77,7 @@ def euclidean_init(X, n_clusters, random_state=0):
 
 
 def _bisected_components(points, n_clusters):
-    from mmreg._neighbors import connected_labels
+    from mmreg._array.neighbors import connected_labels
 
     low, high = 1e-6, float(np.ptp(points, axis=0).max()) or 1.0
     for _ in range(40):

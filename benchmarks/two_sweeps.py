@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from mmreg import MultiModelRegistration, SweepRegistration
-from mmreg._icp import multi_body_icp
-from mmreg._moments import group_moments
+from mmreg._array.moments import group_moments
 from mmreg.datasets import load_argoverse2
 from mmreg.metrics import objects_found, three_way_epe
+from mmreg.sweeps._icp import multi_body_icp
 
 MIN_OBJECT_POINTS = 100
 

@@ -31,7 +31,7 @@ from scipy.spatial.distance import pdist, squareform
 from scipy.spatial.transform import Rotation
 from sklearn.utils import Bunch
 
-from mmreg._neighbors import radius_graph
+from mmreg._array.neighbors import radius_graph
 from mmreg.datasets import SHAPES
 from mmreg.datasets._scene import _unit_shape
 

@@ -14,16 +14,16 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.utils import check_random_state
 
 from mmreg import MultiModelRegistration
-from mmreg._geometry import fit_rigid, rotation_angle
-from mmreg._hypotheses import (
+from mmreg._array.geometry import fit_rigid, rotation_angle
+from mmreg.baselines import NaiveRegistration, SequentialRANSAC, TLinkage
+from mmreg.baselines._t_linkage import preference, tanimoto_linkage, unit_preferences
+from mmreg.datasets import make_scene
+from mmreg.em._hypotheses import (
     count_inliers,
     draw_minimal_samples,
     fit_minimal_samples,
     nearest_model,
 )
-from mmreg.baselines import NaiveRegistration, SequentialRANSAC, TLinkage
-from mmreg.baselines._t_linkage import preference, tanimoto_linkage, unit_preferences
-from mmreg.datasets import make_scene
 from mmreg.estimators import DegenerateInputWarning
 
 

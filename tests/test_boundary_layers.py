@@ -6,9 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
-from mmreg._neighbors import NeighbourTable
-from mmreg.estimators import _robust_steps as robust_steps
-from mmreg.estimators._robust_steps import boundary_layers
+from mmreg._array.neighbors import NeighbourTable
+from mmreg.em import _steps as robust_steps
+from mmreg.em._steps import boundary_layers
 
 
 def reference_layers(points, labels, n_clusters, spacing, thickness, exempt):

@@ -1,9 +1,9 @@
-"""mmreg._motion: the static world and which clusters move, by robust statistics."""
+"""mmreg._array.motion: the static world and which clusters move, by robust statistics."""
 
 import numpy as np
 import pytest
 
-from mmreg._motion import MOVING_FACTOR, motion_statistics, moving_clusters, static_cluster
+from mmreg._array.motion import MOVING_FACTOR, motion_statistics, moving_clusters, static_cluster
 
 
 def _turn(degrees):
@@ -115,7 +115,7 @@ def test_bad_shapes():
 
 @pytest.mark.parametrize("n_groups", [7, 40_000])  # the int16 radix path and the other
 def test_group_median_is_the_median_of_each_group(n_groups):
-    from mmreg._motion import _group_median
+    from mmreg._array.motion import _group_median
 
     rng = np.random.default_rng(n_groups)
     groups = rng.integers(0, n_groups, 60_000)

@@ -1,4 +1,4 @@
-"""mmreg._ego_motion.ego_motion: two raw sweeps' rigid motion, from the identity."""
+"""mmreg.sweeps._ego_motion.ego_motion: two raw sweeps' rigid motion, from the identity."""
 
 import functools
 import importlib.util
@@ -11,8 +11,8 @@ from _surfaces import area_weighted_box
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mmreg._ego_motion import ego_motion
-from mmreg._icp import rotation_vectors_to_matrices
+from mmreg.sweeps._ego_motion import ego_motion
+from mmreg.sweeps._icp import rotation_vectors_to_matrices
 
 ROOT = Path(__file__).resolve().parent.parent
 SCALE = 5.0  # metres, LiDAR's tau
@@ -128,7 +128,7 @@ def test_order_and_sizes_of_the_sweeps_do_not_matter():
 def test_the_caller_s_sweep_normals_give_the_same_answer():
     from scipy.spatial import cKDTree
 
-    from mmreg._icp import SurfaceNormals
+    from mmreg.sweeps._icp import SurfaceNormals
 
     a, sweep, _, _ = sweeps([0.0, 0.0, 0.03], [-2.0, 0.5, 0.0], n=5000, m=6000)
     alone = ego_motion(a, sweep, scale=SCALE)

@@ -16,7 +16,7 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import FunctionTransformer
 
 from mmreg import MultiModelRegistration
-from mmreg._geometry import rotation_angle
+from mmreg._array.geometry import rotation_angle
 from mmreg.datasets import make_scene
 from mmreg.estimators import DegenerateInputWarning, multi_model_em
 

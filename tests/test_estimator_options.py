@@ -12,11 +12,11 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, ClusterMixin
 from sklearn.cluster import KMeans
 
-import mmreg._flow
-import mmreg._gate
-import mmreg.estimators._robust_em
+import mmreg._array.flow
+import mmreg.em._gate
+import mmreg.em._robust
 from mmreg import MultiModelRegistration
-from mmreg._neighbors import query_workers
+from mmreg._array.neighbors import query_workers
 from mmreg.datasets import make_flying_things, make_scene, make_street
 from mmreg.estimators import ScaleWarning
 
@@ -31,7 +31,7 @@ def scene():
 
 # --------------------------------------------------------------------------- n_jobs
 def test_query_workers_has_scikit_learns_meaning(monkeypatch):
-    monkeypatch.setattr(mmreg._neighbors, "cpu_count", lambda: 8)
+    monkeypatch.setattr(mmreg._array.neighbors, "cpu_count", lambda: 8)
     assert [query_workers(n) for n in (None, 1, 3, -1, -2, -8, -20)] == [1, 1, 3, 8, 7, 1, 1]
     with pytest.raises(ValueError, match="n_jobs=0"):
         query_workers(0)
@@ -54,7 +54,7 @@ def test_n_jobs_reaches_the_tree_queries_and_changes_nothing(scene, variant, mon
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         one.fit(scene.X)
-        for module in (mmreg._neighbors, mmreg.estimators._robust_em):
+        for module in (mmreg._array.neighbors, mmreg.em._robust):
             monkeypatch.setattr(module, "cKDTree", _SpyTree)
         _SpyTree.seen = []
         two = MultiModelRegistration(init=init, variant=variant, random_state=0, n_jobs=2)

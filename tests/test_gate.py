@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-import mmreg._gate as gate_module
-from mmreg._gate import ClusterGate
+import mmreg.em._gate as gate_module
+from mmreg.em._gate import ClusterGate
 
 
 def plain_gate(points, labels, radius, query, clusters):

@@ -5,8 +5,8 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mmreg._grouping import group_bounds, group_centroids, sorted_within_groups, unique_sorted
-from mmreg.estimators._robust_steps import group_median
+from mmreg._array.grouping import group_bounds, group_centroids, sorted_within_groups, unique_sorted
+from mmreg.em._steps import group_median
 
 
 @given(

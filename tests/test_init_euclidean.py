@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import cdist
 
-from mmreg._connectivity import cluster_components
-from mmreg._neighbors import (
+from mmreg._array.connectivity import cluster_components
+from mmreg._array.neighbors import (
     NeighbourTable,
     minimum_spanning_forest,
     nearest_in_other_component,

@@ -19,8 +19,8 @@ from scipy.spatial.transform import Rotation
 from sklearn.metrics import adjusted_rand_score
 
 from mmreg import io as mmio
-from mmreg._lidar_files import decode_pointcloud2
 from mmreg.cli import main
+from mmreg.io._lidar import decode_pointcloud2
 
 STATIC = [
     ((0.0, 0.0, 1.5), (6.0, 2.0, 3.0)),

@@ -4,7 +4,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mmreg._moments import group_moments
+from mmreg._array.moments import group_moments
 
 
 def _plain_moments(a, b, labels, n_groups, w):

@@ -4,8 +4,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mmreg._neighbors import NeighbourTable
-from mmreg.estimators._robust_steps import adjacent_pairs, scattered_clusters
+from mmreg._array.neighbors import NeighbourTable
+from mmreg.em._steps import adjacent_pairs, scattered_clusters
 
 
 def reference_scattered(labels, n_clusters, table, exempt):

@@ -19,13 +19,13 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from sklearn.cluster import KMeans
 
-import mmreg._likelihood as likelihood
-import mmreg.estimators._em as em
-from mmreg._gate import ClusterGate
-from mmreg._geometry import fit_rigid, fit_rigid_grouped, fit_rigid_rows
+import mmreg.em._likelihood as likelihood
+import mmreg.em._paper as em
+from mmreg._array.geometry import fit_rigid, fit_rigid_grouped, fit_rigid_rows
 from mmreg.datasets import make_scene
+from mmreg.em._gate import ClusterGate
+from mmreg.em._paper import default_sigma_floor, fit_cluster_models
 from mmreg.estimators import MultiModelRegistration, multi_model_em
-from mmreg.estimators._em import default_sigma_floor, fit_cluster_models
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from conftest import split_init  # noqa: E402

@@ -7,8 +7,8 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
 
-from mmreg._hypotheses import fit_minimal_samples
-from mmreg.estimators._robust_steps import (
+from mmreg.em._hypotheses import fit_minimal_samples
+from mmreg.em._steps import (
     _local_samples,
     _local_translations,
     _sample_every_group,

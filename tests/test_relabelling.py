@@ -6,8 +6,8 @@ from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.transform import Rotation
 
-from mmreg._relabelling import rows_moved
-from mmreg.estimators._robust_em import robust_multi_model_em
+from mmreg._array.relabelling import rows_moved
+from mmreg.em._robust import robust_multi_model_em
 
 labellings = st.builds(
     lambda seed, n, k: np.random.default_rng(seed).integers(-1, k, size=n),

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import special_ortho_group
 
-from mmreg._geometry import apply_motions, own_residuals, residual_table
+from mmreg._array.geometry import apply_motions, own_residuals, residual_table
 
 
 @dataclass

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from mmreg._geometry import row_medians
+from mmreg._array.geometry import row_medians
 
 
 @pytest.mark.parametrize("width", range(1, 11))

@@ -7,11 +7,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mmreg import MultiModelRegistration
-from mmreg._neighbors import NeighbourTable
+from mmreg._array.neighbors import NeighbourTable
 from mmreg.datasets import make_street
-from mmreg.estimators import _robust_steps as robust_steps
-from mmreg.estimators._robust_em import robust_multi_model_em
-from mmreg.estimators._robust_steps import (
+from mmreg.em import _steps as robust_steps
+from mmreg.em._robust import robust_multi_model_em
+from mmreg.em._steps import (
     estimate_range_growth,
     fit_clusters,
     merge_static_world,

@@ -7,8 +7,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.distance import cdist
 
-from mmreg._connectivity import min_gap_between
-from mmreg._neighbors import connected_labels
+from mmreg._array.connectivity import min_gap_between
+from mmreg._array.neighbors import connected_labels
 from mmreg.datasets import make_scene
 from mmreg.testing import (
     good_clusterings,
@@ -33,7 +33,7 @@ def same_partition(first, second):
 
 
 def reference_components(points, tau, groups):
-    """Radius-graph components (mmreg._neighbors), one group at a time."""
+    """Radius-graph components (mmreg._array.neighbors), one group at a time."""
     labels = np.empty(len(points), dtype=np.intp)
     offset = 0
     for group in np.unique(groups):

@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from mmreg import MultiModelRegistration
-from mmreg._geometry import fit_rigid
-from mmreg.estimators._robust_steps import fit_clusters, range_noise_scale
+from mmreg._array.geometry import fit_rigid
+from mmreg.em._steps import fit_clusters, range_noise_scale
 from mmreg.testing import ground_truth_scenes, scenes_with_good_clusterings
 from mmreg.theory import is_good_clustering, satisfies_ground_truth
 

@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from mmreg._neighbors import NeighbourTable, touching_groups
+from mmreg._array.neighbors import NeighbourTable, touching_groups
 
 
 def all_pairs_reference(points, labels, radius):

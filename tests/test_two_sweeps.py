@@ -8,7 +8,7 @@ from _surfaces import area_weighted_box
 from sklearn.base import clone
 
 from mmreg import MultiModelRegistration, SweepRegistration
-from mmreg._icp import multi_body_icp, rotation_vectors_to_matrices
+from mmreg.sweeps._icp import multi_body_icp, rotation_vectors_to_matrices
 
 # Boxes: (centre, size); the first three are the static world, the last two move.
 BOXES = [
@@ -222,8 +222,8 @@ def test_cli_target_of_another_size_points_to_sweep(tmp_path, capsys):
 def test_voxel_islands_join_close_points_and_split_far_ones():
     from scipy.sparse.csgraph import connected_components
 
-    from mmreg._islands import voxel_islands
-    from mmreg._neighbors import radius_graph
+    from mmreg._array.neighbors import radius_graph
+    from mmreg.sweeps._islands import voxel_islands
 
     rng = np.random.default_rng(1)
     blobs = [rng.normal(c, 0.3, (200, 3)) for c in ((0, 0, 0), (8, 0, 0), (0, 9, 3))]
@@ -258,8 +258,8 @@ def test_raw_static_world_keeps_the_ego_motion_exactly():
 
 
 def test_island_that_only_slides_along_its_surface_stays_static():
-    from mmreg._icp import SurfaceNormals
-    from mmreg._island_motions import choose_island_motions
+    from mmreg.sweeps._icp import SurfaceNormals
+    from mmreg.sweeps._island_motions import choose_island_motions
 
     rng = np.random.default_rng(2)
     wall = rng.uniform(-2, 2, (400, 3))

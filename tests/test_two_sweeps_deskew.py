@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 
 import mmreg.estimators._two_sweeps as two_sweeps
 from mmreg import MultiModelRegistration, SweepRegistration
-from mmreg._deskew import deskew, relative_motions
-from mmreg._icp import rotation_vectors_to_matrices
+from mmreg.sweeps._deskew import deskew, relative_motions
+from mmreg.sweeps._icp import rotation_vectors_to_matrices
 
 # Static boxes and one car (centre, size), as in test_two_sweeps.
 STATIC = [

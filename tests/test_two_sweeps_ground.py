@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 from sklearn.metrics import adjusted_rand_score
 
 from mmreg import MultiModelRegistration, SweepRegistration
-from mmreg._ground import ground_mask, has_ground, is_z_up_sweep
 from mmreg.datasets import make_lidar_sweeps
 from mmreg.metrics import objects_found
+from mmreg.sweeps._ground import ground_mask, has_ground, is_z_up_sweep
 
 
 @pytest.fixture(scope="module", params=[0, 1])

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-import mmreg._slow_movers as slow
+import mmreg.sweeps._slow_movers as slow
 from mmreg import SweepRegistration
-from mmreg._icp import SurfaceNormals, rotation_vectors_to_matrices
 from mmreg.datasets._camera import back_project, box_mesh, pinhole_camera, render
+from mmreg.sweeps._icp import SurfaceNormals, rotation_vectors_to_matrices
 
 # World frame: x right, y down, z forward; the camera 2.2 m above the ground, which is
 # not rendered (removed, as in the benchmarks).

@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mmreg import MultiModelRegistration
-from mmreg._voxels import occupied_voxels, voxel_representatives, voxel_side_for
+from mmreg._array.voxels import occupied_voxels, voxel_representatives, voxel_side_for
 from mmreg.datasets import make_flying_things, make_scene
 from mmreg.metrics import iou_score
 

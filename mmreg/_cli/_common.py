@@ -268,7 +268,7 @@ def rotation_angle_deg(rotations):
 
 def background_label(labels):
     """The largest cluster (the static world, when the camera moves), or None."""
-    from mmreg._motion import static_cluster
+    from mmreg._array.motion import static_cluster
 
     label = static_cluster(labels)
     return None if label < 0 else label
@@ -278,7 +278,7 @@ def _robust_rms(residual, group, n_clusters):
     """Per group, the RMS of its inliers (median + 3 robust standard deviations)."""
     import numpy as np
 
-    from mmreg._motion import _INLIER_SIGMAS, _MAD_TO_SIGMA, _group_median
+    from mmreg._array.motion import _INLIER_SIGMAS, _MAD_TO_SIGMA, _group_median
 
     median = _group_median(residual, group, n_clusters)
     mad = _group_median(np.abs(residual - median[group]), group, n_clusters)
@@ -314,8 +314,8 @@ def summarize(X, labels, rotations, translations, sigmas=None, *, residuals=None
     (median + 3 robust standard deviations, so wrong correspondences do not inflate
     it), ``rms_residual`` the plain RMS of ``|R a + t - b|`` over all its
     correspondences. A cluster is ``moving`` when the displacement exceeds
-    :data:`mmreg._motion.MOVING_FACTOR` (3) times the residual scale
-    (:func:`mmreg._motion.moving_clusters`).
+    :data:`mmreg._array.motion.MOVING_FACTOR` (3) times the residual scale
+    (:func:`mmreg._array.motion.moving_clusters`).
 
     ``residuals`` (one per row) replace ``|R a + t - b|`` in the two residual columns:
     for two sweeps, where ``b = a + flow`` is the result's own (:func:`sweep_residuals`).
@@ -326,9 +326,9 @@ def summarize(X, labels, rotations, translations, sigmas=None, *, residuals=None
     import numpy as np
     import pandas as pd
 
-    from mmreg._geometry import moved_rows
-    from mmreg._grouping import group_bounds, group_centroids
-    from mmreg._motion import motion_statistics, moving_from_statistics, static_cluster
+    from mmreg._array.geometry import moved_rows
+    from mmreg._array.grouping import group_bounds, group_centroids
+    from mmreg._array.motion import motion_statistics, moving_from_statistics, static_cluster
 
     a, b = X[:, :3], X[:, 3:]
     rotations = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)

@@ -22,7 +22,7 @@ MAX_TIMES_PER_INTERVAL = 10.0
 
 def is_sequence(path):
     """Whether ``path`` is a ROS bag or a folder (a sequence of frames)."""
-    from mmreg import _lidar_files
+    from mmreg.io import _lidar as _lidar_files
 
     path = Path(path)
     return path.is_dir() or _lidar_files.lidar_kind(path) == "bag"
@@ -53,7 +53,7 @@ def holds_points_only(path):
 
     An array that cannot be read is not (its reader then says why).
     """
-    from mmreg import _lidar_files
+    from mmreg.io import _lidar as _lidar_files
 
     path = Path(path)
     if path.suffix.lower() in CLOUD_EXTENSIONS:

@@ -307,13 +307,13 @@ def default_out(args):
 
 def run(args):
     from mmreg import io as mmio
-    from mmreg._dataset_jobs import SequenceSweepPairJob
     from mmreg.runner import (
         Argoverse2PairJob,
         Argoverse2SweepPairJob,
         dataset_jobs,
         run_dataset,
     )
+    from mmreg.runner._jobs import SequenceSweepPairJob
 
     if importlib.util.find_spec("distributed") is None:
         raise CLIError("'mmreg run' needs dask.distributed: pip install 'mmreg[dask]'")

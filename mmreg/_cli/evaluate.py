@@ -190,7 +190,7 @@ def _predicted_flow(result, X):
     """The result's flow: a job's own, else b - a of derived points, else its motions'."""
     import numpy as np
 
-    from mmreg._flow import rigid_flow
+    from mmreg._array.flow import rigid_flow
 
     if result.flow is not None:
         flow = result.flow

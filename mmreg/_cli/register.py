@@ -162,7 +162,7 @@ TAU_RULE = (
 def _is_lidar_input(args):
     """Whether INPUT is a LiDAR sweep by its format (KITTI, nuScenes, Argoverse 2, a bag or
     a sequence), so that its points are in metres whatever else is given with it."""
-    from mmreg._lidar_files import lidar_kind
+    from mmreg.io._lidar import lidar_kind
 
     path = getattr(args, "input", None)
     return path is not None and (lidar_kind(path) is not None or is_sequence(path))
@@ -539,8 +539,8 @@ def read_sweep(args):
     A file's capture times (an Argoverse 2 .feather's) and timestamp (its name) are kept
     in ``args`` for :func:`read_capture_times`.
     """
-    from mmreg import _lidar_files
     from mmreg import io as mmio
+    from mmreg.io import _lidar as _lidar_files
 
     if getattr(args, "sweep_points", None) is not None:  # a sequence's frame K+1
         return args.sweep_points
@@ -568,7 +568,7 @@ _TIME_OPTIONS = (("times", "--times"), ("sweep_times", "--sweep-times"), ("inter
 
 def _files_carry_times(args):
     """Whether INPUT and its second sweep may hold capture times themselves (read later)."""
-    from mmreg import _lidar_files
+    from mmreg.io import _lidar as _lidar_files
 
     if is_sequence(args.input):
         return True

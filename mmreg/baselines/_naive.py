@@ -4,8 +4,8 @@ from scipy.spatial import cKDTree
 from sklearn.base import _fit_context
 from sklearn.utils.validation import check_is_fitted
 
+from mmreg.em._paper import multi_model_em
 from mmreg.estimators._base import BaseRegistration
-from mmreg.estimators._em import multi_model_em
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["NaiveRegistration"]

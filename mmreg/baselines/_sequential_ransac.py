@@ -8,8 +8,8 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
-from mmreg._geometry import fit_rigid, squared_residuals_all
-from mmreg._hypotheses import (
+from mmreg._array.geometry import fit_rigid, squared_residuals_all
+from mmreg.em._hypotheses import (
     count_inliers,
     draw_minimal_samples,
     fit_minimal_samples,

@@ -14,16 +14,16 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
-from mmreg._geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
-from mmreg._hypotheses import (
+from mmreg._array.geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
+from mmreg._validation import compact_labels
+from mmreg.em._hypotheses import (
     fit_minimal_samples,
     minimal_sample_size,
     nearest_model,
 )
-from mmreg._likelihood import single_threaded_blas
-from mmreg._validation import compact_labels
+from mmreg.em._likelihood import single_threaded_blas
+from mmreg.em._paper import _relabel_by_size
 from mmreg.estimators._base import BaseRegistration
-from mmreg.estimators._em import _relabel_by_size
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels
 
 __all__ = ["TLinkage", "preference", "t_linkage", "tanimoto_linkage"]

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from sklearn.utils import Bunch
 
-from mmreg._neighbors import lookup_tree
+from mmreg._array.neighbors import lookup_tree
 from mmreg.io import _check_readable, _load_npy, _load_npz
 
 __all__ = [

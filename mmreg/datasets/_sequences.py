@@ -86,8 +86,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mmreg import _lidar_files
 from mmreg.io import _check_readable, _load_text_table, _read_point_file
+from mmreg.io import _lidar as _lidar_files
 
 __all__ = [
     "Argoverse2Sweeps",

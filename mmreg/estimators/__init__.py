@@ -1,9 +1,9 @@
 """Registration estimators: the robust default, the paper's Algorithm 1, and what they share."""
 
+from mmreg.em._paper import EMResult, multi_model_em
+from mmreg.em._robust import RobustEMResult, robust_multi_model_em
 from mmreg.estimators._base import BaseRegistration, DegenerateInputWarning
-from mmreg.estimators._em import EMResult, multi_model_em
 from mmreg.estimators._multi_model_registration import MultiModelRegistration, ScaleWarning
-from mmreg.estimators._robust_em import RobustEMResult, robust_multi_model_em
 from mmreg.estimators._two_sweeps import SweepRegistration
 
 __all__ = [

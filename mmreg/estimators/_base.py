@@ -7,16 +7,16 @@ from sklearn.base import BaseEstimator, ClusterMixin
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from mmreg._flow import rigid_flow
-from mmreg._gate import ClusterGate
-from mmreg._geometry import degenerate_groups
-from mmreg._likelihood import classify
-from mmreg._mixture import mixture_log_likelihood
-from mmreg._neighbors import query_workers
+from mmreg._array.flow import rigid_flow
+from mmreg._array.geometry import degenerate_groups
+from mmreg._array.neighbors import query_workers
 from mmreg._validation import invalid_rows, split_correspondences
 from mmreg._warnings import warn
-from mmreg.estimators._em import default_sigma_floor, fit_cluster_models
-from mmreg.estimators._robust_steps import log_uniform_density
+from mmreg.em._gate import ClusterGate
+from mmreg.em._likelihood import classify
+from mmreg.em._mixture import mixture_log_likelihood
+from mmreg.em._paper import default_sigma_floor, fit_cluster_models
+from mmreg.em._steps import log_uniform_density
 
 __all__ = ["BaseRegistration", "DegenerateInputWarning"]
 
@@ -155,7 +155,7 @@ class BaseRegistration(ClusterMixin, BaseEstimator):
         ``pi_0`` is the share of the correspondences labelled -1 in the fit (at least
         ``1 / n``), so that with the clusters' weights ``pi_j = |H_j| / n`` it sums to
         one; ``V`` is the volume of the bounding box of the fitted displacements
-        ``b - a`` (:func:`~mmreg.estimators._robust_steps.log_uniform_density`).
+        ``b - a`` (:func:`~mmreg.em._steps.log_uniform_density`).
         """
         labels = self._fitted_labels()
         n = len(labels)

@@ -10,15 +10,14 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from mmreg._gate import ClusterGate
-from mmreg._geometry import column_bounds, rotation_angle
-from mmreg._neighbors import NeighbourTable
+from mmreg._array.geometry import column_bounds, rotation_angle
+from mmreg._array.neighbors import NeighbourTable
+from mmreg._array.voxels import voxel_representatives, voxel_sample
 from mmreg._validation import check_labels, check_paired, invalid_rows
-from mmreg._voxels import voxel_representatives, voxel_sample
 from mmreg._warnings import warn
-from mmreg.estimators._base import MIN_CORRESPONDENCES, BaseRegistration
-from mmreg.estimators._em import multi_model_em
-from mmreg.estimators._robust_em import (
+from mmreg.em._gate import ClusterGate
+from mmreg.em._paper import multi_model_em
+from mmreg.em._robust import (
     _FALSE_ALARMS,
     assign_to_pieces,
     joins_moving_pieces,
@@ -27,7 +26,8 @@ from mmreg.estimators._robust_em import (
     refit_clusters,
     robust_multi_model_em,
 )
-from mmreg.estimators._robust_steps import judge_correspondences, range_noise_scale
+from mmreg.em._steps import judge_correspondences, range_noise_scale
+from mmreg.estimators._base import MIN_CORRESPONDENCES, BaseRegistration
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels, is_label_array
 
 __all__ = ["MultiModelRegistration", "ScaleWarning"]
@@ -73,7 +73,7 @@ class ScaleWarning(UserWarning):
 def median_spacing(points, random_state=0, neighbours=None):
     """Median distance from an a-point to its nearest neighbour (on a sample of them).
 
-    ``neighbours``: a :class:`~mmreg._neighbors.NeighbourTable` of ``points``, read
+    ``neighbours``: a :class:`~mmreg._array.neighbors.NeighbourTable` of ``points``, read
     instead of a KD-tree query (the same distances).
     """
     points = np.asarray(points, dtype=float)

@@ -2,14 +2,14 @@
 
 :class:`SweepRegistration` wraps a multi-model estimator. Given correspondences and the
 second sweep as its own points, the estimator's clusters are kept and each cluster's
-motion is refined by robust point-to-plane ICP on the second sweep (:mod:`mmreg._icp`),
+motion is refined by robust point-to-plane ICP on the second sweep (:mod:`mmreg.sweeps._icp`),
 so a scene-flow network's bias (a systematic error that a rigid fit keeps) is removed.
 Given the first sweep alone, putative correspondences are made first: the ego motion by
 ICP from the identity, then every spatial island of the first sweep is aligned to the
 second from the ego motion and from the peaks of a histogram of translations to nearby
 points of the second sweep (as ICP-Flow does), and the estimator groups the islands'
 motions into the static world and the moving objects. Given the points' capture times,
-the moving clusters are deskewed in the ICP (:mod:`mmreg._deskew`).
+the moving clusters are deskewed in the ICP (:mod:`mmreg.sweeps._deskew`).
 """
 
 from numbers import Integral, Real
@@ -21,16 +21,16 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
-from mmreg._deskew import deskew, relative_motions
-from mmreg._flow import rigid_flow
-from mmreg._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
-from mmreg._grouping import group_bounds
-from mmreg._icp import SurfaceNormals, multi_body_icp, subsample_groups
-from mmreg._island_motions import choose_island_motions, translation_starts
-from mmreg._islands import voxel_islands
-from mmreg._motion import _group_median, moving_clusters, static_cluster
-from mmreg._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
+from mmreg._array.flow import rigid_flow
+from mmreg._array.grouping import group_bounds
+from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._validation import check_coordinate_range, invalid_rows
+from mmreg.sweeps._deskew import deskew, relative_motions
+from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
+from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
+from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
+from mmreg.sweeps._islands import voxel_islands
+from mmreg.sweeps._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
 
 __all__ = ["SweepRegistration"]
 
@@ -211,18 +211,18 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       clusters at once, starting from the cluster's motion.
     * **raw** -- ``X`` of shape ``(n, 3)``: the first sweep alone. The ego motion is found
       by ICP from the identity. Both sweeps are cut into islands (voxels of side
-      ``island_radius`` that touch, :mod:`mmreg._islands`); every island of the first is
+      ``island_radius`` that touch, :mod:`mmreg.sweeps._islands`); every island of the first is
       aligned to ``sweep`` from the ego motion, from the offsets of its centroid to those
       of nearby islands of the second, and from the peaks of a histogram of translations
       towards the second sweep's points within ``max_displacement`` (as ICP-Flow does).
       An island keeps the ego motion unless its best alternative wins by a clear margin
       (robust point-to-plane likelihood gain over a BIC price, a fifth more of its points
-      explained, and mmreg's moving rule; :mod:`mmreg._island_motions`). Small objects
+      explained, and mmreg's moving rule; :mod:`mmreg.sweeps._island_motions`). Small objects
       that move a few sampling spacings (a pedestrian beside a wall) stay within that
       margin; they are found point by point among the islands that keep the ego
       motion (the points the ego motion leaves far from the second sweep, aligned by
       ICP; kept when they land where the first sweep had nothing;
-      :mod:`mmreg._slow_movers`) and become islands of their own. The islands'
+      :mod:`mmreg.sweeps._slow_movers`) and become islands of their own. The islands'
       motions become putative correspondences for ``estimator``; the static world keeps
       the ego motion and the other clusters are refined as above. This repeats while the
       labels change (at most ``max_rounds`` times): a multi-body ICP around the EM.
@@ -266,7 +266,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     ground : {"auto", "keep", "drop"}, default="auto"
         Raw mode: what to do with the ground of the sweeps. ``"auto"``: when the first
         sweep is z-up (it spreads far wider than it is tall, see
-        :func:`mmreg._ground.is_z_up_sweep`), the ground of both sweeps is found
+        :func:`mmreg.sweeps._ground.is_z_up_sweep`), the ground of both sweeps is found
         (Patchwork++, in the units of the estimator's ``tau``; or the masks given to
         ``fit``) and given to the static world: the ego-motion ICP uses it (it holds roll,
         pitch and height), the islands, hypotheses and object ICPs leave it out (a patch
@@ -274,7 +274,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         take the static world's label and motion. A sweep whose ground was removed
         before, or a scene without one, is registered as it is (the ground found must
         hold 6 % of the points and surround the sensor, see
-        :func:`mmreg._ground.has_ground`). ``"drop"``: found the same way, the ground
+        :func:`mmreg.sweeps._ground.has_ground`). ``"drop"``: found the same way, the ground
         is left out: its points are labelled -1 and take the static world's flow.
         ``"keep"``: the ground is registered like every other point.
     random_state : int, RandomState instance or None, default=None
@@ -728,7 +728,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         The a-points of every cluster of ``part``, and the points of the second sweep
         nearer to that cluster's moved points than to any other cluster's, are moved to
         their sweep's reference time along the cluster's motion relative to the static
-        world (:mod:`mmreg._deskew`); the ICP aligns the deskewed sets. ``group`` numbers
+        world (:mod:`mmreg.sweeps._deskew`); the ICP aligns the deskewed sets. ``group`` numbers
         the ICP's points by their cluster's place in ``part``.
         """
         times, sweep_times, interval = timing
@@ -786,7 +786,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         """The dominant motion: ICP of the whole first sweep from the identity, coarse to fine.
 
         Returns the motion and its robust point-to-plane residual scale. (GICP,
-        :func:`mmreg._ego_motion.ego_motion`, is more accurate on real sweeps and finds
+        :func:`mmreg.sweeps._ego_motion.ego_motion`, is more accurate on real sweeps and finds
         motions of several metres, but without a robust kernel it is pulled off where
         moving objects make much of a scene; ``benchmarks/ego_motion.py`` compares them.)
         """

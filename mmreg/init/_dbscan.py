@@ -10,7 +10,7 @@ from sklearn.base import _fit_context
 from sklearn.cluster import DBSCAN
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from mmreg._neighbors import query_workers
+from mmreg._array.neighbors import query_workers
 from mmreg._warnings import user_stacklevel
 from mmreg.init._partition import PartitionInitializer, number_by_first_point
 

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 from sklearn.utils.validation import check_array
 
-from mmreg._connectivity import cluster_components
+from mmreg._array.connectivity import cluster_components
 from mmreg._validation import check_labels, split_correspondences
 
 __all__ = ["describe_partition"]

@@ -31,8 +31,8 @@ from scipy.spatial import cKDTree
 from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval
 
-from mmreg._connectivity import tau_components
-from mmreg._neighbors import (
+from mmreg._array.connectivity import tau_components
+from mmreg._array.neighbors import (
     connected_labels,
     minimum_spanning_forest,
     nearest_in_other_component,
@@ -729,7 +729,7 @@ def _group_forest(group_a, group_b, lengths, n_groups):
 def _boruvka_step(points, components, workers):
     """Each component's shortest edge to another one, on the true distances.
 
-    :func:`~mmreg._neighbors.shortest_edges_between_components` prunes with bounding
+    :func:`~mmreg._array.neighbors.shortest_edges_between_components` prunes with bounding
     boxes whose rounding can drop the closest pair when it is the boxes' own gap (points
     on a line), so this asks every point for its nearest point in another component.
     """

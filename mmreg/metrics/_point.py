@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 from sklearn.exceptions import UndefinedMetricWarning
 from sklearn.utils import check_array
 
-from mmreg._geometry import apply_motions
+from mmreg._array.geometry import apply_motions
 from mmreg._warnings import user_stacklevel
 from mmreg.metrics._checks import check_correspondences, check_label_pair, check_transforms
 from mmreg.metrics._clustering import contingency, match_clusters

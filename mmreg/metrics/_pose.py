@@ -5,7 +5,7 @@ import warnings
 import numpy as np
 from sklearn.exceptions import UndefinedMetricWarning
 
-from mmreg._geometry import fit_rigid_grouped, rotation_angle
+from mmreg._array.geometry import fit_rigid_grouped, rotation_angle
 from mmreg._validation import check_labels
 from mmreg._warnings import user_stacklevel
 from mmreg.metrics._checks import check_correspondences, check_label_pair, check_transforms

@@ -8,7 +8,7 @@ fails and why; :func:`is_tau_connected` and :func:`tau_components` are the conne
 notion both rest on.
 """
 
-from mmreg._connectivity import tau_components
+from mmreg._array.connectivity import tau_components
 from mmreg.theory._definitions import (
     is_good_clustering,
     is_tau_connected,

@@ -13,8 +13,8 @@ from scipy.spatial import cKDTree
 from sklearn.utils import check_array
 from sklearn.utils._param_validation import Interval, StrOptions, validate_params
 
-from mmreg._connectivity import min_gap_between, tau_components
-from mmreg._geometry import residuals
+from mmreg._array.connectivity import min_gap_between, tau_components
+from mmreg._array.geometry import residuals
 from mmreg._validation import check_labels, compact_labels, split_correspondences
 from mmreg.theory._reports import Condition, GoodClusteringReport, GroundTruthReport
 

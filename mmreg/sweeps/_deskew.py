@@ -20,7 +20,7 @@ reference time).
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mmreg._icp import rotation_vectors_to_matrices
+from mmreg.sweeps._icp import rotation_vectors_to_matrices
 
 __all__ = ["deskew", "relative_motions"]
 
@@ -49,7 +49,7 @@ def relative_motions(rotations, translations, world):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._deskew import relative_motions
+    >>> from mmreg.sweeps._deskew import relative_motions
     >>> world = (np.eye(3), np.array([1.0, 0.0, 0.0]))
     >>> first, second = relative_motions(np.eye(3)[None], np.array([[3.0, 0.0, 0.0]]), world)
     >>> first[1].tolist(), second[1].tolist()
@@ -98,7 +98,7 @@ def deskew(points, groups, fractions, rotations, translations, centres, *, turn=
     moved back by 0.5 m, one captured a quarter early forward by 0.25 m.
 
     >>> import numpy as np
-    >>> from mmreg._deskew import deskew
+    >>> from mmreg.sweeps._deskew import deskew
     >>> out = deskew(np.zeros((2, 3)), np.array([0, 0]), np.array([0.5, -0.25]),
     ...              np.eye(3)[None], np.array([[1.0, 0.0, 0.0]]), np.zeros((1, 3)))
     >>> out[:, 0].tolist()

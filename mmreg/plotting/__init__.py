@@ -21,9 +21,9 @@ Views (``view``):
 
 import numpy as np
 
-from mmreg import _sweep_layout
-from mmreg._frames import FRAMES, detect_frame, looks_down_minus_z
-from mmreg._grouping import group_centroids
+from mmreg._array.grouping import group_centroids
+from mmreg.plotting import _sweep_layout
+from mmreg.plotting._frames import FRAMES, detect_frame, looks_down_minus_z
 
 __all__ = [
     "BACKGROUND_COLOR",

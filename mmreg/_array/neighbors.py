@@ -3,7 +3,7 @@
 A set of points is *tau-connected* (Section IV) when any two of them are joined by a
 chain of points with consecutive gaps of at most ``tau``: exactly when the radius graph
 with edges ``||p - q|| <= tau`` is connected. These helpers are shared by the Euclidean
-initialiser and the tests; :mod:`mmreg._connectivity` finds tau-connected pieces without
+initialiser and the tests; :mod:`mmreg._array.connectivity` finds tau-connected pieces without
 listing the pairs, for the large ``tau`` of the gate.
 """
 
@@ -13,7 +13,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
-from mmreg._geometry import column_bounds
+from mmreg._array.geometry import column_bounds
 
 __all__ = [
     "NeighbourTable",
@@ -120,7 +120,7 @@ def lookup_tree(points):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._neighbors import lookup_tree
+    >>> from mmreg._array.neighbors import lookup_tree
     >>> lookup_tree(np.array([[0.0, 0], [3, 4]])).query([[3.0, 3.0]])[0]
     array([1.])
     """
@@ -136,7 +136,7 @@ def query_workers(n_jobs):
 
     Examples
     --------
-    >>> from mmreg._neighbors import query_workers
+    >>> from mmreg._array.neighbors import query_workers
     >>> query_workers(None), query_workers(3)
     (1, 3)
     """
@@ -394,7 +394,7 @@ def touching_groups(points, labels, radius):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._neighbors import touching_groups
+    >>> from mmreg._array.neighbors import touching_groups
     >>> points = np.array([[0.0, 0], [1, 0], [2, 0], [3, 0], [9, 0]])
     >>> touching_groups(points, np.array([0, 0, 1, 2, 3]), 1.0)
     array([[0, 1],

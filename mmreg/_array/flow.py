@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from mmreg._geometry import apply_motions
-from mmreg._neighbors import lookup_tree
+from mmreg._array.geometry import apply_motions
+from mmreg._array.neighbors import lookup_tree
 
 __all__ = ["rigid_flow"]
 
@@ -34,7 +34,7 @@ def rigid_flow(a, labels, rotations, translations, *, workers=1):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._flow import rigid_flow
+    >>> from mmreg._array.flow import rigid_flow
     >>> a = np.array([[0.0, 0, 0], [1, 0, 0], [1.1, 0, 0], [9, 0, 0]])
     >>> labels = np.array([0, 1, -1, 1])
     >>> rotations = np.stack([np.eye(3)] * 2)

@@ -9,8 +9,8 @@ blocked matrix products.
 
 import numpy as np
 
-from mmreg._geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
-from mmreg._likelihood import single_threaded_blas
+from mmreg._array.geometry import degenerate_groups, fit_rigid_grouped, squared_residuals_all
+from mmreg.em._likelihood import single_threaded_blas
 
 __all__ = [
     "count_inliers",
@@ -80,7 +80,7 @@ def count_inliers(a, b, rotations, translations, threshold):
     """Number of correspondences within ``threshold`` of each motion.
 
     The ``(n, K)`` table of squared residuals is built in row blocks of bounded memory,
-    one matrix product per block (:func:`~mmreg._geometry.squared_residuals_all`), on
+    one matrix product per block (:func:`~mmreg._array.geometry.squared_residuals_all`), on
     one BLAS thread: these thin products gain nothing from a second thread and lose a
     lot to it when the cores are busy.
 

@@ -121,7 +121,7 @@ def group_moments(a, b, labels, n_groups, weights=None):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._moments import group_moments
+    >>> from mmreg._array.moments import group_moments
     >>> a = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     >>> m = group_moments(a, a + [1.0, 2.0, 3.0], np.zeros(4, int), 1)
     >>> rotations, translations = m.fit()

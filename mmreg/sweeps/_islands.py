@@ -51,7 +51,7 @@ def voxel_islands(points, cell, min_size=1):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._islands import voxel_islands
+    >>> from mmreg.sweeps._islands import voxel_islands
     >>> points = np.array([[0.0, 0, 0], [0.4, 0, 0], [0.8, 0, 0], [5, 5, 5], [9, 0, 0]])
     >>> voxel_islands(points, 0.5, min_size=1)
     (array([0, 0, 0, 1, 2]), 3)

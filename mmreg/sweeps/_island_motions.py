@@ -12,7 +12,7 @@ an island keeps the ego motion unless
 * it explains (residual under three scales) a tenth more of the island's points than
   the ego motion, and a quarter of those the ego motion leaves unexplained, and
 * the alternative moves the island relative to the ego motion by mmreg's own rule
-  (:func:`mmreg._motion.moving_clusters`: median displacement over three times the
+  (:func:`mmreg._array.motion.moving_clusters`: median displacement over three times the
   residual scale), with the points' feet on the second sweep's surface as the
   correspondences.
 
@@ -25,9 +25,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
 
-from mmreg._grouping import group_centroids
-from mmreg._icp import subsample_groups
-from mmreg._motion import moving_clusters
+from mmreg._array.grouping import group_centroids
+from mmreg._array.motion import moving_clusters
+from mmreg.sweeps._icp import subsample_groups
 
 __all__ = ["choose_island_motions", "point_costs", "translation_starts"]
 
@@ -105,7 +105,7 @@ def translation_starts(
     An island moved by 2 m along x, its twin in the second sweep.
 
     >>> import numpy as np
-    >>> from mmreg._island_motions import translation_starts
+    >>> from mmreg.sweeps._island_motions import translation_starts
     >>> rng = np.random.default_rng(0)
     >>> a = rng.uniform(0, 1, (200, 3))
     >>> sweep = a + [2.0, 0.0, 0.0]
@@ -172,7 +172,7 @@ def point_costs(moved, target, *, max_distance, scale):
     moved : ndarray of shape (n, 3)
     target : tuple
         ``(sweep, tree, normals)``: the second sweep, its cKDTree and its
-        :class:`mmreg._icp.SurfaceNormals`.
+        :class:`mmreg.sweeps._icp.SurfaceNormals`.
     max_distance : float
     scale : float
 

@@ -24,8 +24,8 @@ residual scale.
 
 import numpy as np
 
-from mmreg._geometry import moved_rows
-from mmreg._grouping import sorted_within_groups
+from mmreg._array.geometry import moved_rows
+from mmreg._array.grouping import sorted_within_groups
 
 __all__ = [
     "MOVING_FACTOR",
@@ -59,7 +59,7 @@ def static_cluster(labels):
 
     Examples
     --------
-    >>> from mmreg._motion import static_cluster
+    >>> from mmreg._array.motion import static_cluster
     >>> static_cluster([2, 2, 0, 1, 1, -1, -1, -1])
     1
     >>> static_cluster([-1, -1])
@@ -120,7 +120,7 @@ def motion_statistics(a, b, labels, rotations, translations, static):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._motion import motion_statistics
+    >>> from mmreg._array.motion import motion_statistics
     >>> a = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 0], [6, 5, 0], [5, 6, 0]])
     >>> b = a + np.array([[0.0, 0, 0]] * 3 + [[2.0, 0, 0]] * 3)  # the second moves 2 along x
     >>> labels = np.array([0, 0, 0, 1, 1, 1])
@@ -216,7 +216,7 @@ def moving_clusters(a, b, labels, rotations, translations, static):
     correspondences wrong by up to 30 m: the wrong ones do not hide the motion.
 
     >>> import numpy as np
-    >>> from mmreg._motion import moving_clusters, static_cluster
+    >>> from mmreg._array.motion import moving_clusters, static_cluster
     >>> rng = np.random.default_rng(0)
     >>> a = np.vstack([rng.uniform(0, 10, (300, 3)), rng.uniform(20, 24, (90, 3))])
     >>> labels = np.repeat([0, 1], [300, 90])

@@ -36,7 +36,7 @@ def sorted_within_groups(values, groups, n_groups):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._grouping import sorted_within_groups
+    >>> from mmreg._array.grouping import sorted_within_groups
     >>> sorted_within_groups(np.array([3.0, 1.0, 2.0, 0.0]), np.array([1, 0, 1, 0]), 3)
     (array([0., 1., 2., 3.]), array([0, 2, 4]), array([2, 2, 0]))
     """
@@ -64,7 +64,7 @@ def group_bounds(points, groups, n_groups):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._grouping import group_bounds
+    >>> from mmreg._array.grouping import group_bounds
     >>> low, high = group_bounds(np.array([[0.0, 5], [2, 1], [9, 9]]), np.array([0, 0, 2]), 3)
     >>> low.tolist(), high.tolist()
     ([[0.0, 1.0], [inf, inf], [9.0, 9.0]], [[2.0, 5.0], [-inf, -inf], [9.0, 9.0]])
@@ -93,7 +93,7 @@ def group_centroids(points, labels, n_groups):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._grouping import group_centroids
+    >>> from mmreg._array.grouping import group_centroids
     >>> centroids, sizes = group_centroids(np.array([[0.0, 0, 0], [2, 0, 0], [5, 5, 5]]),
     ...                                    np.array([0, 0, 1]), 2)
     >>> centroids.tolist(), sizes.tolist()
@@ -135,7 +135,7 @@ def unique_sorted(values):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._grouping import unique_sorted
+    >>> from mmreg._array.grouping import unique_sorted
     >>> unique_sorted(np.array([5, 1, 5, 3, 1]))
     (array([1, 3, 5]), array([0, 2, 3]))
     """

@@ -2,7 +2,7 @@
 
 The loop is the paper's (fit every cluster, drop the small ones, reassign each
 correspondence to its most likely cluster within the gate); the named steps of
-:mod:`mmreg.estimators._robust_steps` sit between its lines:
+:mod:`mmreg.em._steps` sit between its lines:
 
 1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member, each
    cluster with a robust noise scale of its own;
@@ -35,13 +35,13 @@ from scipy.spatial import cKDTree
 from scipy.stats import chi2
 from sklearn.utils import check_random_state
 
-from mmreg._gate import ClusterGate
-from mmreg._geometry import row_medians
-from mmreg._likelihood import morton_order, single_threaded_blas
-from mmreg._neighbors import NeighbourTable, lookup_tree
-from mmreg._relabelling import rows_moved
-from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
-from mmreg.estimators._robust_steps import (
+from mmreg._array.geometry import row_medians
+from mmreg._array.neighbors import NeighbourTable, lookup_tree
+from mmreg._array.relabelling import rows_moved
+from mmreg.em._gate import ClusterGate
+from mmreg.em._likelihood import morton_order, single_threaded_blas
+from mmreg.em._paper import EMResult, _compact_initial, _size_rank, default_sigma_floor
+from mmreg.em._steps import (
     _with,
     adjacent_pairs,
     assign_correspondences,
@@ -238,7 +238,7 @@ def robust_multi_model_em(
         are one object (:func:`join_moving_pieces`).
     tol : float, default=1e-3
         Converged when an iteration moves at most this fraction of the correspondences
-        to another reported cluster (:func:`~mmreg._relabelling.rows_moved`: the
+        to another reported cluster (:func:`~mmreg._array.relabelling.rows_moved`: the
         clusters of two iterations matched by overlap, so that a merge moves the smaller
         part's members and a proposal its own; a move between pieces of the static
         world does not count, and a proposal that moves too slowly to leave it is

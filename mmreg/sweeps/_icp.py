@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
 
 # The same median as the command line's motion statistics (the mean of the two middle values).
-from mmreg._motion import _group_median
+from mmreg._array.motion import _group_median
 
 __all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
 
@@ -55,7 +55,7 @@ def rotation_vectors_to_matrices(omega):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._icp import rotation_vectors_to_matrices
+    >>> from mmreg.sweeps._icp import rotation_vectors_to_matrices
     >>> R = rotation_vectors_to_matrices(np.array([[0.0, 0.0, np.pi / 2]]))
     >>> np.round(R[0] @ [1.0, 0.0, 0.0], 12) + 0.0
     array([0., 1., 0.])
@@ -142,7 +142,7 @@ def subsample_groups(labels, max_per_group, random_state=None):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._icp import subsample_groups
+    >>> from mmreg.sweeps._icp import subsample_groups
     >>> labels = np.array([0, 0, 0, 0, 1, 1, -1])
     >>> np.bincount(labels[subsample_groups(labels, 2, random_state=0)]).tolist()
     [2, 2]
@@ -266,7 +266,7 @@ def multi_body_icp(
     A plane corner moved by 5 cm and sampled again: the motion is found.
 
     >>> import numpy as np
-    >>> from mmreg._icp import multi_body_icp
+    >>> from mmreg.sweeps._icp import multi_body_icp
     >>> rng = np.random.default_rng(0)
     >>> def corner(n):
     ...     p = rng.uniform(0, 2, (n, 3))

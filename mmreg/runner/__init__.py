@@ -58,7 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mmreg._dataset_jobs import (
+from mmreg.runner._jobs import (
     Argoverse2PairJob,
     Argoverse2SweepPairJob,
     BrokenLogJob,

@@ -26,7 +26,7 @@ def rows_moved(before, after):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._relabelling import rows_moved
+    >>> from mmreg._array.relabelling import rows_moved
     >>> rows_moved(np.array([0, 0, 1, 1, -1]), np.array([5, 5, 3, 3, -1]))
     0
     >>> rows_moved(np.array([0, 0, 0, 1, 1]), np.array([2, 2, 2, 2, 2]))

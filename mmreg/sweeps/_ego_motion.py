@@ -3,7 +3,7 @@
 The engine is small_gicp's generalized ICP (Segal et al., RSS 2009; Koide, 2024): every
 voxel-downsampled point carries the covariance of its neighbourhood, so a match counts
 along the surface's normal only, on both sweeps at once. It was measured beside our own
-point-to-plane ICP (``mmreg._icp.multi_body_icp``) and KISS-ICP on real Argoverse 2 pairs
+point-to-plane ICP (``mmreg.sweeps._icp.multi_body_icp``) and KISS-ICP on real Argoverse 2 pairs
 and on ray-cast street sweeps (``benchmarks/ego_motion.py``): it was the most accurate.
 
 Every length is a multiple of the one length the caller gives, ``scale``: the points are
@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from mmreg._icp import SurfaceNormals
+from mmreg.sweeps._icp import SurfaceNormals
 
 __all__ = ["ego_motion"]
 
@@ -204,7 +204,7 @@ def ego_motion(
     workers : int, default=1
         Threads of small_gicp.
     sweep_normals : SurfaceNormals or None, default=None
-        ``mmreg._icp.SurfaceNormals(sweep, cKDTree(sweep), 10)`` where the caller keeps
+        ``mmreg.sweeps._icp.SurfaceNormals(sweep, cKDTree(sweep), 10)`` where the caller keeps
         one (``SweepRegistration`` does): the residual scale then reuses its KD-tree and
         normals. None: built here.
     robust : bool, default=False
@@ -250,7 +250,7 @@ def ego_motion(
     degrees and moved on by 1.2 m:
 
     >>> import numpy as np
-    >>> from mmreg._ego_motion import ego_motion
+    >>> from mmreg.sweeps._ego_motion import ego_motion
     >>> rng = np.random.default_rng(0)
     >>> def corner(n):
     ...     p = rng.uniform(0, 30, (n, 3))

@@ -471,7 +471,7 @@ class SequenceSweepPairJob:
 def _is_sequence(path):
     """A KITTI sequence folder, a ROS bag (a ``.bag``, ``.db3``, ``.mcap`` or folder), or a
     folder of LiDAR sweep files (KITTI ``.bin``, nuScenes ``.pcd.bin``, ``.feather``)."""
-    from mmreg._lidar_files import lidar_kind
+    from mmreg.io._lidar import lidar_kind
 
     path = Path(path)
     if lidar_kind(path) == "bag":
@@ -576,7 +576,7 @@ def dataset_jobs(
     >>> import tempfile
     >>> from pathlib import Path
     >>> import numpy as np
-    >>> from mmreg._dataset_jobs import dataset_jobs
+    >>> from mmreg.runner._jobs import dataset_jobs
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     for k in range(3):
     ...         np.save(Path(folder) / f"frame{k}.npy", np.zeros((5, 3)))

@@ -26,7 +26,7 @@ def admitted_clusters(gate, points):
     """Boolean ``(m, K)``: does the gate admit cluster ``j`` for point ``i``?
 
     The bounding balls rule out most pairs at once; the gate's exact test
-    (:meth:`~mmreg._gate.ClusterGate.admits`) decides the pairs left, all in one call.
+    (:meth:`~mmreg.em._gate.ClusterGate.admits`) decides the pairs left, all in one call.
     """
     mask = gate.reach_boxes(points, points)
     if gate.radius is None:

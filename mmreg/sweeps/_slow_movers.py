@@ -1,7 +1,7 @@
 """Raw sweeps: small objects that move less than the ego motion's inlier band.
 
 An island keeps the ego motion unless another motion explains clearly more of its
-points (:mod:`mmreg._island_motions`); an object that moves a few times the sweeps'
+points (:mod:`mmreg.sweeps._island_motions`); an object that moves a few times the sweeps'
 sampling spacing (a pedestrian, 0.1-0.2 m between sweeps) stays within the band in
 which the ego motion already explains a point, and it often shares an island with the
 static structure it walks past. Here the test is made per point and in units of the
@@ -16,7 +16,7 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
    The unexplained points that no moving island holds are cut into tight islands
    (voxels of side ``cell``, half the islands').
 2. **Motion**: every seed is aligned to the second sweep by the robust multi-body ICP
-   (:mod:`mmreg._icp`), started at the ego motion.
+   (:mod:`mmreg.sweeps._icp`), started at the ego motion.
 3. **Tests** (all must hold):
 
    * *residual drop*: at least 60% of the seed's points are explained (within 2
@@ -44,9 +44,9 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from mmreg._icp import multi_body_icp, subsample_groups
-from mmreg._islands import voxel_islands
-from mmreg._motion import _group_median
+from mmreg._array.motion import _group_median
+from mmreg.sweeps._icp import multi_body_icp, subsample_groups
+from mmreg.sweeps._islands import voxel_islands
 
 __all__ = ["beyond_spacing", "slow_movers"]
 
@@ -163,7 +163,7 @@ def slow_movers(
         The ego ICP's robust residual scale.
     target : tuple
         ``(sweep, tree, normals)``: the second sweep, its cKDTree and its
-        :class:`mmreg._icp.SurfaceNormals`.
+        :class:`mmreg.sweeps._icp.SurfaceNormals`.
     resting : cKDTree
         The first sweep's points moved by the ego motion.
     cell : float
@@ -173,7 +173,7 @@ def slow_movers(
     max_points : int
         Points per seed in its ICP.
     max_distance, max_iter, tol
-        Of the ICP (:func:`mmreg._icp.multi_body_icp`).
+        Of the ICP (:func:`mmreg.sweeps._icp.multi_body_icp`).
     random_state : RandomState
 
     Returns
@@ -190,8 +190,8 @@ def slow_movers(
 
     >>> import numpy as np
     >>> from scipy.spatial import cKDTree
-    >>> from mmreg._icp import SurfaceNormals
-    >>> from mmreg._slow_movers import slow_movers
+    >>> from mmreg.sweeps._icp import SurfaceNormals
+    >>> from mmreg.sweeps._slow_movers import slow_movers
     >>> g = np.arange(0, 4, 0.04)
     >>> wall = np.stack(np.meshgrid(g, [0.0], g, indexing="ij"), -1).reshape(-1, 3)
     >>> s = np.arange(0, 1, 0.04)

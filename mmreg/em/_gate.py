@@ -6,7 +6,7 @@ Definitions 1 and 2 call points at most ``tau`` apart ``tau``-connected; with a 
 pieces of an object exactly ``tau`` apart would never meet, against Theorem 1 (see
 ``tests/test_theory_counterexamples.py``). Testing every (point, cluster)
 pair exactly would need ``n * K`` nearest-neighbour queries per EM iteration. The
-classification step (:func:`mmreg._likelihood.classify`) asks only about the few pairs
+classification step (:func:`mmreg.em._likelihood.classify`) asks only about the few pairs
 where a cluster scores better than the point's own one, and three tests, cheapest first,
 settle almost all of those:
 
@@ -20,8 +20,8 @@ settle almost all of those:
 
 import numpy as np
 
-from mmreg._grouping import unique_sorted
-from mmreg._neighbors import lookup_tree
+from mmreg._array.grouping import unique_sorted
+from mmreg._array.neighbors import lookup_tree
 
 __all__ = ["ClusterGate", "gated_argmax"]
 

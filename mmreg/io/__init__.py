@@ -26,7 +26,7 @@ point clouds
     ``binary_compressed``; ``x``, ``y``, ``z`` and packed ``rgb``), read and written by
     mmreg itself (the files agree with Open3D's); ``.xyz`` (``x y z`` per line) as text;
     ``.npy`` / ``.csv`` / ``.txt`` ``(n, 3)`` arrays for reading.
-LiDAR sweeps (reading; see :mod:`mmreg._lidar_files`)
+LiDAR sweeps (reading; see :mod:`mmreg.io._lidar`)
     KITTI velodyne ``.bin`` (float32 ``x y z reflectance``), nuScenes ``.pcd.bin``
     (float32 ``x y z intensity ring``), Argoverse 2 ``.feather`` (``x y z``, and
     ``offset_ns``: the capture times). Invalid returns (NaN or all-zero rows) are kept in
@@ -77,7 +77,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mmreg import _lidar_files
+from mmreg.io import _lidar as _lidar_files
 
 __all__ = [
     "atomic_write",

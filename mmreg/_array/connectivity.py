@@ -1,6 +1,6 @@
 """Tau-connected components and gaps between groups of points, for any ``tau``.
 
-The radius graph of :mod:`mmreg._neighbors` lists every pair within ``tau``; when ``tau``
+The radius graph of :mod:`mmreg._array.neighbors` lists every pair within ``tau``; when ``tau``
 is large compared to the sampling gap (the paper's ``tau = 1.5`` m on dense objects) that
 is billions of edges. Connectivity needs far fewer, so :func:`tau_components` works on a
 grid instead:
@@ -24,7 +24,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from mmreg._neighbors import radius_graph
+from mmreg._array.neighbors import radius_graph
 
 __all__ = ["cluster_components", "min_gap_between", "tau_components"]
 

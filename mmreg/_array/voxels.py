@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from mmreg._geometry import column_bounds
-from mmreg._grouping import unique_sorted
+from mmreg._array.geometry import column_bounds
+from mmreg._array.grouping import unique_sorted
 
 __all__ = ["occupied_voxels", "voxel_representatives", "voxel_sample", "voxel_side_for"]
 
@@ -29,7 +29,7 @@ def voxel_representatives(points, size):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._voxels import voxel_representatives
+    >>> from mmreg._array.voxels import voxel_representatives
     >>> points = np.array([[0.1, 0.1], [0.2, 0.3], [1.5, 0.1], [0.4, 0.2]])
     >>> voxel_representatives(points, 1.0)
     array([0, 2])
@@ -95,7 +95,7 @@ def voxel_side_for(points, n_voxels, *, slack=0.15, max_steps=12):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._voxels import occupied_voxels, voxel_side_for
+    >>> from mmreg._array.voxels import occupied_voxels, voxel_side_for
     >>> points = np.random.default_rng(0).uniform(size=(20_000, 3))
     >>> side = voxel_side_for(points, 1_000)
     >>> 850 <= occupied_voxels(points, side) <= 1_000
@@ -121,7 +121,7 @@ def voxel_sample(points, n_voxels, *, slack=0.15, max_steps=12):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._voxels import voxel_sample
+    >>> from mmreg._array.voxels import voxel_sample
     >>> points = np.random.default_rng(0).uniform(size=(20_000, 3))
     >>> side, rows = voxel_sample(points, 1_000)
     >>> 850 <= len(rows) <= 1_000

@@ -23,13 +23,13 @@ from scipy.spatial import cKDTree
 from scipy.special import gamma
 from scipy.stats import binom, chi2
 
-from mmreg._connectivity import tau_components
-from mmreg._geometry import column_bounds, own_residuals, residual_table
-from mmreg._grouping import sorted_within_groups, unique_sorted
-from mmreg._hypotheses import fit_minimal_samples, minimal_sample_size
-from mmreg._likelihood import morton_order
-from mmreg._moments import Moments, group_moments
-from mmreg._neighbors import NeighbourTable, touching_groups
+from mmreg._array.connectivity import tau_components
+from mmreg._array.geometry import column_bounds, own_residuals, residual_table
+from mmreg._array.grouping import sorted_within_groups, unique_sorted
+from mmreg._array.moments import Moments, group_moments
+from mmreg._array.neighbors import NeighbourTable, touching_groups
+from mmreg.em._hypotheses import fit_minimal_samples, minimal_sample_size
+from mmreg.em._likelihood import morton_order
 
 __all__ = [
     "ClusterModels",

@@ -54,7 +54,7 @@ def fit_rigid_grouped(a, b, labels, n_groups):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._geometry import fit_rigid_grouped
+    >>> from mmreg._array.geometry import fit_rigid_grouped
     >>> a = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     >>> R, t, counts = fit_rigid_grouped(a, a + [1, 2, 3], np.zeros(4, int), 1)
     >>> np.round(t, 6)
@@ -168,7 +168,7 @@ def fit_rigid(a, b):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._geometry import fit_rigid
+    >>> from mmreg._array.geometry import fit_rigid
     >>> a = np.random.default_rng(0).normal(size=(10, 3))
     >>> R, t = fit_rigid(a, a @ np.diag([1., -1, -1]).T)
     >>> np.round(R, 6) + 0.0
@@ -191,7 +191,7 @@ def column_bounds(points):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._geometry import column_bounds
+    >>> from mmreg._array.geometry import column_bounds
     >>> column_bounds(np.array([[0.0, 5.0], [2.0, -1.0]]))
     (array([ 0., -1.]), array([2., 5.]))
     """
@@ -217,7 +217,7 @@ def row_medians(values):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._geometry import row_medians
+    >>> from mmreg._array.geometry import row_medians
     >>> row_medians(np.array([[3.0, 1.0, 2.0, 10.0], [0.0, 0.0, 5.0, 1.0]]))
     array([2.5, 0.5])
     """
@@ -326,7 +326,7 @@ def residual_table(rotations, translations, a_rows, b_rows, *, origins=None):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._geometry import residual_table
+    >>> from mmreg._array.geometry import residual_table
     >>> a = np.array([[0.0, 1.0], [0.0, 0.0], [0.0, 0.0]])  # the points (0,0,0), (1,0,0)
     >>> residual_table(np.stack([np.eye(3)] * 2), np.array([[0, 0, 0], [1, 0, 0.0]]), a, a)
     array([[0., 0.],
@@ -480,7 +480,7 @@ def rotation_angle(rotations_a, rotations_b=None, *, degrees=True):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg._geometry import rotation_angle
+    >>> from mmreg._array.geometry import rotation_angle
     >>> Rz = np.array([[0., -1, 0], [1, 0, 0], [0, 0, 1]])
     >>> float(rotation_angle(Rz))
     90.0

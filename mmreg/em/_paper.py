@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mmreg._gate import ClusterGate
-from mmreg._geometry import fit_rigid_rows
-from mmreg._likelihood import CorrespondenceBlocks, classify, single_threaded_blas
+from mmreg._array.geometry import fit_rigid_rows
 from mmreg._validation import compact_labels
+from mmreg.em._gate import ClusterGate
+from mmreg.em._likelihood import CorrespondenceBlocks, classify, single_threaded_blas
 
 __all__ = ["EMResult", "default_sigma_floor", "multi_model_em"]
 
@@ -251,7 +251,7 @@ def multi_model_em(
     An iteration costs ``O(n d^2)`` for the M-step (after the first, only the clusters
     whose members changed are refitted) and, for the E-step, ``O(d^2)`` per pair of a
     correspondence and a cluster still in play: in reach of the gate and not provably
-    worse than the correspondence's own cluster (see :mod:`mmreg._likelihood`); points
+    worse than the correspondence's own cluster (see :mod:`mmreg.em._likelihood`); points
     whose surroundings did not change are not scored again. Memory is ``O(n d^2)``,
     about 450 MiB of arrays for a million correspondences. None of this changes a label:
     the result is that of the plain loop in ``benchmarks/straightforward_em.py``.

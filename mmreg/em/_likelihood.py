@@ -24,7 +24,7 @@ import functools
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from mmreg._gate import gated_argmax
+from mmreg.em._gate import gated_argmax
 
 __all__ = ["CorrespondenceBlocks", "classify"]
 

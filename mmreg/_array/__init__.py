@@ -1,0 +1,1 @@
+"""Array helpers under the EM and the sweeps: geometry, moments, neighbours, voxels."""

@@ -1,0 +1,1 @@
+"""Two raw sweeps: the ground, the ego motion, ICP, islands, slow movers, deskew."""
