@@ -197,16 +197,18 @@ class Steps:
 
 def load_npz(path, what=None):
     """``{name: array}`` of an ``.npz`` file, read strictly (CRC-checked, nothing after its end)."""
-    from mmreg import io as mmio
+    from mmreg.io._arrays import _load_npz
+    from mmreg.io._checks import _check_readable
 
-    return mmio._load_npz(mmio._check_readable(path, what))
+    return _load_npz(_check_readable(path, what))
 
 
 def load_npy(path, what=None):
     """The array of a ``.npy`` file, read strictly (its size must match its header)."""
-    from mmreg import io as mmio
+    from mmreg.io._arrays import _load_npy
+    from mmreg.io._checks import _check_readable
 
-    return mmio._load_npy(mmio._check_readable(path, what))
+    return _load_npy(_check_readable(path, what))
 
 
 def check_correspondences(X, path):

@@ -32,7 +32,8 @@ def _columns(path):
     """Columns of a 2-D ``.npy`` / ``.csv`` / ``.txt`` array (its header only, for .npy)."""
     import numpy as np
 
-    from mmreg import io as mmio
+    from mmreg.io._arrays import _load_npy
+    from mmreg.io._correspondences import _array_columns
 
     if path.suffix.lower() == ".npy":
         npy = np.lib.format
@@ -43,9 +44,9 @@ def _columns(path):
             elif version == (2, 0):
                 shape = npy.read_array_header_2_0(handle)[0]
             else:
-                shape = mmio._load_npy(path).shape
+                shape = _load_npy(path).shape
         return shape[1] if len(shape) == 2 else None
-    return mmio._array_columns(path, path.suffix.lower())
+    return _array_columns(path, path.suffix.lower())
 
 
 def holds_points_only(path):

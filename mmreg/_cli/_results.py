@@ -22,6 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from mmreg._cli._common import CLIError, check_labels, read_result_input, reading
+from mmreg.io._arrays import _load_npz
+from mmreg.io._checks import _check_readable
 
 # The arrays every job file holds (see mmreg.runner).
 _JOB_ARRAYS = ("labels", "rotations", "translations", "flow")
@@ -163,10 +165,8 @@ def _directory_result(folder):
 def _job_result(path):
     import numpy as np
 
-    from mmreg import io as mmio
-
     with reading(path):
-        arrays = mmio._load_npz(mmio._check_readable(path, "a job's result"))
+        arrays = _load_npz(_check_readable(path, "a job's result"))
         missing = [name for name in (*_JOB_ARRAYS, "meta") if name not in arrays]
         if missing:
             raise CLIError(

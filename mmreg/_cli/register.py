@@ -37,6 +37,7 @@ from mmreg._cli._lidar_input import (
     read_frames,
 )
 from mmreg._validation import NotCorrespondencesError
+from mmreg.io._correspondences import _read_points
 
 NAME = "register"
 HELP = "find the moving objects, their motions and the outliers in correspondences"
@@ -424,8 +425,6 @@ def _read_sequence_input(args, other):
     second sweep, and the frames' capture times and stamps the capture-time arguments."""
     import numpy as np
 
-    from mmreg import io as mmio
-
     sequence, first, second = read_frames(args)
     args.sweep_points = second.points
     args.input_times, args.sweep_file_times = first.times, second.times
@@ -438,7 +437,7 @@ def _read_sequence_input(args, other):
         return a
     path = args.target if args.target is not None else args.flow
     with reading(path):
-        values = mmio._read_points(path, "the b-points" if args.target else "the flow")
+        values = _read_points(path, "the b-points" if args.target else "the flow")
     if len(values) != len(a):
         raise CLIError(f"{path}: {len(values):,} rows for the {len(a):,} points of {first.source}")
     X = np.hstack([a, values if args.target is not None else a + values])

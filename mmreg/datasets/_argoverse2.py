@@ -31,7 +31,9 @@ from scipy.spatial.transform import Rotation
 from sklearn.utils import Bunch
 
 from mmreg._array.neighbors import lookup_tree
-from mmreg.io import _check_readable, _load_npy, _load_npz
+from mmreg.io._arrays import _load_npy, _load_npz
+from mmreg.io._checks import _check_readable
+from mmreg.io._feather import numeric_column, read_feather
 
 __all__ = [
     "ARGOVERSE2_CATEGORIES",
@@ -187,52 +189,7 @@ def _require_file(path, what):
 
 # --------------------------------------------------------------------------- file readers
 def _read_feather(path, columns, what, optional=(), nulls_as_nan=()):
-    """``{column: ndarray}`` of a feather file; ValueError naming it when unreadable.
-
-    ``columns`` must all be present; those of ``optional`` are read when present. Missing
-    values are an error, except in the float columns of ``nulls_as_nan`` (a LiDAR's
-    invalid returns, as pandas writes NaN), where they read as NaN.
-    """
-    import pyarrow as pa
-    import pyarrow.feather as feather
-
-    path = _require_file(path, what)
-    try:
-        table = feather.read_table(path)
-    except (pa.ArrowException, OSError, ValueError, EOFError) as exc:
-        raise ValueError(
-            f"{path}: cannot be read as a feather file ({what}; truncated or corrupt?): {exc}"
-        ) from exc
-    missing = [c for c in columns if c not in table.column_names]
-    if missing:
-        raise ValueError(
-            f"{path}: missing column(s) {', '.join(missing)} ({what}); it has "
-            f"{', '.join(table.column_names) or 'no columns'}."
-        )
-    out = {}
-    for name in tuple(columns) + tuple(c for c in optional if c in table.column_names):
-        column = table.column(name)
-        if column.null_count and name in nulls_as_nan and pa.types.is_floating(column.type):
-            column = column.cast(pa.float64()).fill_null(float("nan"))
-        if column.null_count:
-            raise ValueError(f"{path}: column {name} has {column.null_count} missing values.")
-        try:
-            out[name] = column.to_numpy()
-        except (pa.ArrowException, ValueError) as exc:
-            raise ValueError(f"{path}: column {name} cannot be read ({what}): {exc}") from exc
-    return out
-
-
-def _numeric(values, path, name, kind="f", *, finite=True):
-    values = np.asarray(values)
-    if values.dtype.kind not in ("iu" if kind == "i" else "iuf"):
-        raise ValueError(f"{path}: column {name} must be numeric; got dtype {values.dtype}.")
-    if kind == "i":
-        return values.astype(np.int64)
-    values = values.astype(np.float64)
-    if finite and not np.all(np.isfinite(values)):
-        raise ValueError(f"{path}: column {name} holds NaN or infinite values.")
-    return values
+    return read_feather(_require_file(path, what), columns, what, optional, nulls_as_nan)
 
 
 def _read_points(path):
@@ -242,10 +199,10 @@ def _read_points(path):
     file has no such column.
     """
     columns = _read_feather(path, _LIDAR_COLUMNS, "LiDAR sweep", optional=(_OFFSET_COLUMN,))
-    points = np.column_stack([_numeric(columns[c], path, c) for c in _LIDAR_COLUMNS])
+    points = np.column_stack([numeric_column(columns[c], path, c) for c in _LIDAR_COLUMNS])
     times = None
     if _OFFSET_COLUMN in columns:
-        times = _numeric(columns[_OFFSET_COLUMN], path, _OFFSET_COLUMN, "i") * 1e-9
+        times = numeric_column(columns[_OFFSET_COLUMN], path, _OFFSET_COLUMN, "i") * 1e-9
     return points.reshape(-1, 3), times
 
 
@@ -258,8 +215,8 @@ def _quaternion_matrices(q_wxyz, path):
 
 def _poses(columns, path):
     """(k, 4, 4) rigid transforms from the qw..qz, tx_m..tz_m columns."""
-    q = np.column_stack([_numeric(columns[c], path, c) for c in ("qw", "qx", "qy", "qz")])
-    t = np.column_stack([_numeric(columns[c], path, c) for c in ("tx_m", "ty_m", "tz_m")])
+    q = np.column_stack([numeric_column(columns[c], path, c) for c in ("qw", "qx", "qy", "qz")])
+    t = np.column_stack([numeric_column(columns[c], path, c) for c in ("tx_m", "ty_m", "tz_m")])
     T = np.tile(np.eye(4), (len(q), 1, 1))
     if len(q):
         T[:, :3, :3] = _quaternion_matrices(q, path)
@@ -313,12 +270,14 @@ class _Log:
         path = self.annotations_path
         cols = _read_feather(path, _ANNOTATION_COLUMNS, "the tracked cuboids")
         out = {
-            "timestamp_ns": _numeric(cols["timestamp_ns"], path, "timestamp_ns", "i"),
-            "num_interior_pts": _numeric(cols["num_interior_pts"], path, "num_interior_pts", "i"),
+            "timestamp_ns": numeric_column(cols["timestamp_ns"], path, "timestamp_ns", "i"),
+            "num_interior_pts": numeric_column(
+                cols["num_interior_pts"], path, "num_interior_pts", "i"
+            ),
             "track_uuid": np.asarray(cols["track_uuid"]).astype(str),
             "category": np.asarray(cols["category"]).astype(str),
             "size": np.column_stack(
-                [_numeric(cols[c], path, c) for c in ("length_m", "width_m", "height_m")]
+                [numeric_column(cols[c], path, c) for c in ("length_m", "width_m", "height_m")]
             ).reshape(-1, 3),
             "pose": _poses(cols, path),
         }
@@ -331,7 +290,7 @@ class _Log:
     def poses(self):
         path = self.poses_path
         cols = _read_feather(path, _POSE_COLUMNS, "the ego-vehicle poses")
-        stamps = _numeric(cols["timestamp_ns"], path, "timestamp_ns", "i")
+        stamps = numeric_column(cols["timestamp_ns"], path, "timestamp_ns", "i")
         order = np.argsort(stamps, kind="stable")
         return stamps[order], _poses(cols, path)[order]
 
@@ -935,7 +894,9 @@ def read_scene_flow(path, n=None, *, return_valid=False):
     valid = None
     if suffix == ".feather":
         table = _read_feather(path, _FLOW_COLUMNS, "scene flow", optional=("is_valid",))
-        flow = np.column_stack([_numeric(table[c], path, c, finite=False) for c in _FLOW_COLUMNS])
+        flow = np.column_stack(
+            [numeric_column(table[c], path, c, finite=False) for c in _FLOW_COLUMNS]
+        )
         valid = table.get("is_valid")
     elif suffix == ".npy":
         flow = _load_npy(path)

@@ -45,7 +45,7 @@ import numpy as np
 from sklearn.utils import Bunch, check_random_state
 
 from mmreg.datasets._camera import back_project, pinhole_camera, sample_pixels
-from mmreg.io import _check_readable
+from mmreg.io._checks import _check_readable
 
 __all__ = ["load_kitti_scene_flow"]
 

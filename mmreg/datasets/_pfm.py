@@ -16,7 +16,8 @@ float32, rows from top to bottom.
 
 import numpy as np
 
-from mmreg.io import _check_readable, atomic_write
+from mmreg.io import atomic_write
+from mmreg.io._checks import _check_readable
 
 __all__ = ["read_flo", "read_pfm", "write_flo", "write_pfm"]
 

@@ -86,8 +86,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mmreg.io import _check_readable, _load_text_table, _read_point_file
 from mmreg.io import _lidar as _lidar_files
+from mmreg.io._arrays import _load_text_table
+from mmreg.io._checks import _check_readable
+from mmreg.io._correspondences import _read_point_file
 
 __all__ = [
     "Argoverse2Sweeps",

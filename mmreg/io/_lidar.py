@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mmreg.io._feather import numeric_column, read_feather
+
 # Bytes of one point, and how many float32 it holds, of the flat binary formats.
 _FLAT_FORMATS = {
     "kitti": (4, "KITTI velodyne .bin", "float32 x y z reflectance"),
@@ -110,25 +112,22 @@ def _read_flat(path, kind):
 
 
 def _read_feather_sweep(path):
-    # The Argoverse 2 loader's strict feather reader (missing columns, nulls, corrupt file).
-    from mmreg.datasets._argoverse2 import _numeric, _read_feather
-
-    columns = _read_feather(
+    columns = read_feather(
         path,
         ("x", "y", "z"),
         "LiDAR sweep: x y z",
         optional=("intensity", "offset_ns"),
         nulls_as_nan=("x", "y", "z", "intensity"),
     )
-    points = np.column_stack([_numeric(columns[c], path, c, finite=False) for c in "xyz"])
+    points = np.column_stack([numeric_column(columns[c], path, c, finite=False) for c in "xyz"])
     if len(points) == 0:
         raise ValueError(f"{path}: holds no points (0 rows).")
     times = None
     if "offset_ns" in columns:
-        times = _numeric(columns["offset_ns"], path, "offset_ns", "i") * 1e-9
+        times = numeric_column(columns["offset_ns"], path, "offset_ns", "i") * 1e-9
     intensity = None
     if "intensity" in columns:
-        intensity = _numeric(columns["intensity"], path, "intensity", finite=False)
+        intensity = numeric_column(columns["intensity"], path, "intensity", finite=False)
     return points.reshape(-1, 3), times, intensity
 
 

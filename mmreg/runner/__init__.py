@@ -58,6 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mmreg.io._arrays import _load_npz
 from mmreg.runner._jobs import (
     Argoverse2PairJob,
     Argoverse2SweepPairJob,
@@ -411,10 +412,8 @@ def read_job_result(path, fingerprint=None):
     result : tuple (arrays, row) or None
         ``arrays``: ``{name: ndarray}``; ``row``: the job's summary row (a dict).
     """
-    from mmreg import io as mmio
-
     try:
-        arrays = mmio._load_npz(path)
+        arrays = _load_npz(path)
         meta = json.loads(str(arrays.pop("meta")))
     except (OSError, ValueError, KeyError, TypeError):
         return None

@@ -55,6 +55,9 @@ from mmreg.datasets._argoverse2 import (
     _read_points,
     read_scene_flow,
 )
+from mmreg.io._arrays import _load_npz
+from mmreg.io._checks import _check_points
+from mmreg.io._correspondences import _read_points as read_point_file
 
 __all__ = [
     "Argoverse2PairJob",
@@ -84,10 +87,8 @@ class FramePairJob:
     target: str
 
     def load(self):
-        from mmreg import io as mmio
-
-        a = mmio._read_points(self.source, "the frame's points")
-        b = mmio._read_points(self.target, "the next frame's points")
+        a = read_point_file(self.source, "the frame's points")
+        b = read_point_file(self.target, "the next frame's points")
         if len(a) != len(b):
             raise ValueError(
                 f"{self.target}: holds {len(b)} points but {self.source} holds {len(a)}; "
@@ -107,10 +108,8 @@ class SweepPairJob:
     target: str
 
     def load(self):
-        from mmreg import io as mmio
-
-        a = mmio._read_points(self.source, "the first sweep's points")
-        sweep = mmio._read_points(self.target, "the second sweep's points")
+        a = read_point_file(self.source, "the first sweep's points")
+        sweep = read_point_file(self.target, "the second sweep's points")
         return {"X": a, "sweep": sweep}
 
 
@@ -127,7 +126,7 @@ class CorrespondenceFileJob:
         X = mmio.read_correspondences(self.path)
         data = {"X": X}
         if Path(self.path).suffix.lower() == ".npz":
-            arrays = mmio._load_npz(self.path)
+            arrays = _load_npz(self.path)
             if "labels" in arrays:
                 labels = np.asarray(arrays["labels"])
                 if labels.shape != (len(X),) or labels.dtype.kind not in "iu":
@@ -137,7 +136,7 @@ class CorrespondenceFileJob:
                     )
                 data["labels_true"] = labels.astype(np.intp)
             if "flow" in arrays:
-                flow = mmio._check_points(arrays["flow"], self.path, 3, "key 'flow'")
+                flow = _check_points(arrays["flow"], self.path, 3, "key 'flow'")
                 if len(flow) != len(X):
                     raise ValueError(f"{self.path}: 'flow' has {len(flow)} rows for {len(X)}.")
                 data["flow_true"] = flow
