@@ -333,7 +333,7 @@ def test_plot_clusters_bev_of_a_z_up_sweep_is_from_above():
 def test_an_opengl_camera_is_turned_into_opencv_exactly():
     from scipy.spatial.transform import Rotation
 
-    from mmreg.plotting import _turned_to_opencv
+    from mmreg.plotting._result import _turned_to_opencv
 
     rng = np.random.default_rng(3)
     rotations = Rotation.random(4, random_state=1).as_matrix()
