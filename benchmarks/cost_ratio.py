@@ -8,7 +8,7 @@ and writes it to ``benchmarks/results/cost_ratio.md`` (``--out``).
 
 Inputs. Generated (always): the Table I scene (:func:`mmreg.datasets.make_scene`, real
 meshes, noise 0.03, ``tau=1.5``) with the default Euclidean init and with a k-means(100)
-init given as labels (issue 21's row; the k-means fit is not timed), a street
+init given as labels (the scale table's row; the k-means fit is not timed), a street
 (:func:`~mmreg.datasets.make_street`) and a FlyingThings3D-like scene
 (:func:`~mmreg.datasets.make_flying_things`), ``tau=5``. Real (when ``--data`` holds them;
 read, never copied, through ``benchmarks/real.py``'s loader and protocol, ground removed,
@@ -18,7 +18,7 @@ and the Argoverse 2 inputs (``--av2``, slower: the paper variant takes seconds t
 Columns: ``n`` correspondences; the minimum and the median over the repetitions of each
 variant's CPU time (``time.process_time``: both cores' work, the initialisation included);
 ``ratio`` the default's over the paper variant's, of the minima (the least disturbed runs)
-and of the medians. The goal (issue 18) is at most 2x everywhere.
+and of the medians. The goal is at most 2x everywhere.
 """
 
 import argparse

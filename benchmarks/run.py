@@ -1,14 +1,14 @@
 """Timing and memory benchmarks of mmreg: ``python benchmarks/run.py [--quick]``.
 
 Five sections, each printed as a Markdown table and written as a CSV under
-``benchmarks/results/`` (or ``--out``); ``--sections`` picks them, by default ``issue21``
+``benchmarks/results/`` (or ``--out``); ``--sections`` picks them, by default ``scale``
 alone (a few minutes; ``--sections all`` runs every one):
 
-``issue21``
-    Every row of issue 21's table (the issue's figure, its goal, the time and peak
+``scale``
+    Every row of the scale table (the issue's figure, its goal, the time and peak
     memory measured now, and the floor at each size: one k-d tree k = 8 k-NN pass with
     its build, and one pass over the data), each row in a fresh process; see
-    ``benchmarks/issue21.py`` (``issue21.csv`` and ``issue21.md``).
+    ``benchmarks/scale.py`` (``scale.csv`` and ``scale.md``).
 
 ``paper``
     Paper scale (Section V-A): 22,395 correspondences on 7 objects, Gaussian noise 0.03,
@@ -332,8 +332,8 @@ def main(argv=None):
     parser.add_argument("--out", default=str(HERE / "results"), help="directory for the CSVs")
     parser.add_argument(
         "--sections",
-        default="issue21",
-        help="comma-separated subset of: issue21, paper, yardstick, scaling_n, scaling_k; or all",
+        default="scale",
+        help="comma-separated subset of: scale, paper, yardstick, scaling_n, scaling_k; or all",
     )
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -342,18 +342,18 @@ def main(argv=None):
         return
     sections = set(args.sections.split(","))
     if "all" in sections:
-        sections = {"issue21", "paper", "yardstick", "scaling_n", "scaling_k"}
+        sections = {"scale", "paper", "yardstick", "scaling_n", "scaling_k"}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     info = machine()
     print("Machine: " + ", ".join(f"{key} {value}" for key, value in info.items()))
-    if sections - {"issue21"}:  # the machine of the older sections' CSVs
+    if sections - {"scale"}:  # the machine of the older sections' CSVs
         write_csv(out / "machine.csv", [info])
 
-    if "issue21" in sections:
-        import issue21
+    if "scale" in sections:
+        import scale
 
-        issue21.main(["--out", str(out)] + ["--quick"] * args.quick)
+        scale.main(["--out", str(out)] + ["--quick"] * args.quick)
 
     if sections & {"paper", "yardstick"}:
         scene, init = paper_scene()

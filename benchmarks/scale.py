@@ -1,4 +1,4 @@
-"""Every row of issue 21's table ("Scale"), measured now: ``python benchmarks/issue21.py``.
+"""Time and peak memory by scene size, measured now: ``python benchmarks/scale.py``.
 
 Also the default section of ``benchmarks/run.py``. Each row runs in a fresh Python
 process (``--row NAME``), so its peak memory is its own: the process's maximum resident
@@ -58,7 +58,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROWS = ("table1", "1m", "far", "euclidean", "startup", "register")
 
-# The issue's table: (work, today, goal), as written in issue 21.
+# The goals: (work, the figure when the goal was set, the goal).
 ISSUE = {
     "table1": (
         "Table I scene (22,395 correspondences), default, k-means(100) init given",
@@ -368,7 +368,7 @@ def floor_text(row):
 
 def markdown(rows):
     lines = [
-        "| work | today (issue 21) | goal | method | measured now | floor at this size |",
+        "| work | when the goal was set | goal | method | measured now | floor at this size |",
         "|---|---|---|---|---|---|",
     ]
     for row in rows:
@@ -404,7 +404,7 @@ def run_all(names, quick, out=None, blas_threads=None):
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        pd.DataFrame(rows).to_csv(out / "issue21.csv", index=False, float_format="%.6g")
+        pd.DataFrame(rows).to_csv(out / "scale.csv", index=False, float_format="%.6g")
     return rows
 
 
@@ -425,7 +425,7 @@ def main(argv=None):
         "--rows", default=",".join(ROWS), help=f"comma-separated: {', '.join(ROWS)}"
     )
     parser.add_argument("--quick", action="store_true", help="smaller scenes, fewer repeats")
-    parser.add_argument("--out", default=str(HERE / "results"), help="folder of issue21.csv/.md")
+    parser.add_argument("--out", default=str(HERE / "results"), help="folder of scale.csv/.md")
     parser.add_argument(
         "--blas-threads",
         type=int,
@@ -453,8 +453,8 @@ def main(argv=None):
     table = markdown(rows)
     total = f"whole run: {time.perf_counter() - start:.0f} s"
     print("\n" + table + "\n\n" + total)
-    Path(args.out, "issue21.md").write_text(
-        f"# Issue 21's table, measured\n\n`python benchmarks/issue21.py{_shown(argv)}`"
+    Path(args.out, "scale.md").write_text(
+        f"# Time and peak memory by scene size\n\n`python benchmarks/scale.py{_shown(argv)}`"
         f"\n\n{header}\n\n{table}\n\n{total}\n"
     )
 
