@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from mmreg import io as mmio
 from mmreg.cli import main
-from mmreg.datasets import make_scene
+from mmreg.datasets import make_flying_things, make_scene
 
 
 def _box_surface(rng, n, low, high):
@@ -73,6 +73,16 @@ def test_tau_default_is_five_for_sweeps_and_one_and_a_half_for_correspondences(
     flow = ["--flow", tmp_path / "flow.npy"]
     _register(capsys, tmp_path / "000000.bin", *flow, "--out", tmp_path / "d", "-q")
     assert json.loads((tmp_path / "d" / "run.json").read_text())["estimator"]["tau"] == 5.0
+    # A .ply is a sweep when its geometry says so (a z-up disc around the sensor); a camera
+    # scene's .ply with its flow stays correspondences.
+    _register(capsys, folder / "s0.ply", *flow, "--out", tmp_path / "e", "-q")
+    assert json.loads((tmp_path / "e" / "run.json").read_text())["estimator"]["tau"] == 5.0
+    camera = make_flying_things(n_objects=2, random_state=0)
+    mmio.write_point_cloud(tmp_path / "camera.ply", camera.X[:, :3])
+    np.save(tmp_path / "camera_flow.npy", camera.X[:, 3:] - camera.X[:, :3])
+    camera_flow = ["--flow", tmp_path / "camera_flow.npy"]
+    _register(capsys, tmp_path / "camera.ply", *camera_flow, "--out", tmp_path / "f", "-q")
+    assert json.loads((tmp_path / "f" / "run.json").read_text())["estimator"]["tau"] == 1.5
     for command in ("register", "run"):
         with pytest.raises(SystemExit):
             main([command, "--help"])

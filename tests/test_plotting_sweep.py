@@ -12,6 +12,7 @@ from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from matplotlib.patches import FancyArrowPatch  # noqa: E402
 
+from mmreg._array.frames import detect_frame, looks_down_minus_z  # noqa: E402
 from mmreg._cli._common import result_figure  # noqa: E402
 from mmreg.cli import main  # noqa: E402
 from mmreg.datasets import make_street  # noqa: E402
@@ -19,7 +20,6 @@ from mmreg.plotting import (
     _sweep_layout,  # noqa: E402
     plot_sweep,  # noqa: E402
 )
-from mmreg.plotting._frames import detect_frame, looks_down_minus_z  # noqa: E402
 
 INTERVAL = 0.1
 

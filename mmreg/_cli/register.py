@@ -154,19 +154,23 @@ def _voxel_size(text):
 TAU_SWEEPS = 5.0
 TAU_CORRESPONDENCES = 1.5
 TAU_RULE = (
-    f"'auto': {TAU_SWEEPS:g} for LiDAR sweeps (register --sweep or a LiDAR file or log as "
-    f"INPUT; run --pairs sweeps or a LiDAR log), else {TAU_CORRESPONDENCES:g} "
+    f"'auto': {TAU_SWEEPS:g} for LiDAR sweeps (register --sweep, a LiDAR file or log or a "
+    f"z-up sweep as INPUT; run --pairs sweeps or a LiDAR log), else {TAU_CORRESPONDENCES:g} "
     "(correspondences, the paper's)"
 )
 
 
-def _is_lidar_input(args):
-    """Whether INPUT is a LiDAR sweep by its format (KITTI, nuScenes, Argoverse 2, a bag or
-    a sequence), so that its points are in metres whatever else is given with it."""
+def _is_lidar_input(args, points=None):
+    """Whether INPUT is a LiDAR sweep, so that its points are in metres whatever else is
+    given with it: by its format (KITTI, nuScenes, Argoverse 2, a bag or a sequence), or,
+    for a cloud or an array, by its geometry (a z-up disc around the sensor)."""
+    from mmreg._array.frames import detect_frame
     from mmreg.io._lidar import lidar_kind
 
     path = getattr(args, "input", None)
-    return path is not None and (lidar_kind(path) is not None or is_sequence(path))
+    if path is not None and (lidar_kind(path) is not None or is_sequence(path)):
+        return True
+    return points is not None and detect_frame(points) == "lidar"
 
 
 def resolve_tau(tau, sweeps):
@@ -654,7 +658,7 @@ def _fit(X, init, args, steps, sweep=None, timing=None):
         # fit ("auto" included) clusters its own sample.
         labels = init
     estimator = MultiModelRegistration(
-        tau=resolve_tau(args.tau, sweep is not None or _is_lidar_input(args)),
+        tau=resolve_tau(args.tau, sweep is not None or _is_lidar_input(args, X[:, :3])),
         min_cluster_size=args.min_cluster_size,
         max_iter=args.max_iter,
         init=labels,

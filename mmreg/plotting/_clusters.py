@@ -2,8 +2,8 @@
 
 import numpy as np
 
+from mmreg._array.frames import FRAMES, detect_frame
 from mmreg._array.grouping import group_centroids
-from mmreg.plotting._frames import FRAMES, detect_frame
 from mmreg.plotting._style import (
     VIEWS,
     _background_label,

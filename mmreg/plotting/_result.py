@@ -2,8 +2,8 @@
 
 import numpy as np
 
+from mmreg._array.frames import FRAMES, detect_frame, looks_down_minus_z
 from mmreg.plotting._clusters import plot_clusters
-from mmreg.plotting._frames import FRAMES, detect_frame, looks_down_minus_z
 from mmreg.plotting._street import plot_street
 from mmreg.plotting._style import VIEWS, _background_label, _check_labels, _check_points
 from mmreg.plotting._sweep import SWEEP_RANGE, plot_sweep

@@ -57,7 +57,7 @@ def detect_frame(points):
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg.plotting._frames import detect_frame
+    >>> from mmreg._array.frames import detect_frame
     >>> rng = np.random.default_rng(0)
     >>> azimuth, distance = rng.uniform(-np.pi, np.pi, 500), rng.uniform(3, 40, 500)
     >>> sweep = np.c_[distance * np.cos(azimuth), distance * np.sin(azimuth),
@@ -109,7 +109,7 @@ def looks_down_minus_z(points):
 
     Examples
     --------
-    >>> from mmreg.plotting._frames import looks_down_minus_z
+    >>> from mmreg._array.frames import looks_down_minus_z
     >>> looks_down_minus_z([[0.0, 1.0, -5.0], [1.0, 0.0, -9.0]])
     True
     """
