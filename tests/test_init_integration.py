@@ -121,6 +121,9 @@ def ari_scorer(estimator, X, y):
     return adjusted_rand_score(y, estimator.predict(X))
 
 
+# One initial cluster for four objects is one motion for the whole scene: a "static world"
+# that turns by far more than a sensor does, which the fit reports as a ScaleWarning.
+@pytest.mark.filterwarnings("ignore::mmreg.estimators.ScaleWarning")
 def test_grid_search_over_init_parameters(scene):
     est = MultiModelRegistration(init=EuclideanClustering())
     assert "init__n_clusters" in est.get_params()
@@ -168,3 +171,15 @@ def test_initialiser_transform_in_a_pipeline(scene):
     pipe.fit(scene.X, scene.labels)
     assert pipe.score(scene.X, scene.labels) == 1.0
     assert pipe[:-1].transform(scene.X).shape == (1200, pipe[0].n_clusters_)
+
+
+def test_default_init_on_a_small_scene_warns_nothing():
+    # 150 rows cannot hold the shortcut's 100 clusters of 4 points: the scene is clustered
+    # as finely as it allows, with no warning the user did not ask for.
+    scene = make_scene(n_objects=3, n_points=150, random_state=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        est = MultiModelRegistration(random_state=0).fit(scene.X)
+    assert adjusted_rand_score(scene.labels, est.labels_) == 1.0
+    with pytest.warns(UserWarning, match="No radius tried gives n_clusters=100"):
+        EuclideanClustering(n_clusters=100).fit(scene.X)

@@ -13,6 +13,7 @@ from mmreg import MultiModelRegistration
 from mmreg.cli import main
 from mmreg.datasets import make_scene
 from mmreg.estimators._multi_model_registration import ScaleWarning, _first_copies
+from mmreg.init import EuclideanClustering
 
 
 def _street_like(random_state=0):
@@ -28,7 +29,14 @@ def _street_like(random_state=0):
 
 
 STREET, STREET_LABELS = _street_like()
-FIT = MultiModelRegistration(tau=5.0, random_state=0).fit(STREET)
+
+
+def _estimator(tau=5.0):
+    # 20 initial clusters: 800 rows of four objects hold fewer than the default 100.
+    return MultiModelRegistration(tau=tau, init=EuclideanClustering(n_clusters=20), random_state=0)
+
+
+FIT = _estimator().fit(STREET)
 
 
 def test_creeping_object_is_static_world_and_moving_one_is_found():
@@ -39,7 +47,7 @@ def test_creeping_object_is_static_world_and_moving_one_is_found():
 @settings(max_examples=8, deadline=None)
 @given(scale=st.floats(1e-3, 1e3))
 def test_labels_do_not_depend_on_units(scale):
-    est = MultiModelRegistration(tau=5.0 * scale, random_state=0).fit(STREET * scale)
+    est = _estimator(5.0 * scale).fit(STREET * scale)
     assert est.min_motion_ == pytest.approx(0.05 * scale)
     assert adjusted_rand_score(FIT.labels_, est.labels_) == 1.0
 
@@ -48,7 +56,7 @@ def test_invalid_rows_are_left_out_and_counted():
     nan_rows = np.full((7, 6), np.nan)
     zero_a = np.hstack([np.zeros((40, 3)), STREET[:40, 3:]])  # failed returns at the origin
     X = np.vstack([STREET, nan_rows, zero_a])
-    est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
+    est = _estimator().fit(X)
     assert est.n_invalid_ == 47
     assert_array_equal(est.labels_[: len(STREET)], FIT.labels_)
     assert_array_equal(est.labels_[len(STREET) :], -1)
@@ -61,7 +69,7 @@ def test_invalid_rows_are_left_out_and_counted():
 @given(seed=st.integers(0, 2**16))
 def test_duplicated_rows_do_not_change_the_labels(seed):
     rows = np.random.default_rng(seed).choice(len(STREET), 100, replace=False)
-    est = MultiModelRegistration(tau=5.0, random_state=0).fit(np.vstack([STREET, STREET[rows]]))
+    est = _estimator().fit(np.vstack([STREET, STREET[rows]]))
     assert adjusted_rand_score(FIT.labels_, est.labels_[: len(STREET)]) == 1.0
     assert_array_equal(est.labels_[len(STREET) :], est.labels_[rows])
 
@@ -83,7 +91,7 @@ def test_a_static_world_that_turns_83_degrees_warns_about_units():
     world = STREET_LABELS < 3
     X[world, 3:] = X[world, :3] @ turn.T
     with pytest.warns(ScaleWarning, match="units") as caught:
-        est = MultiModelRegistration(tau=5.0, random_state=0).fit(X)
+        est = _estimator().fit(X)
     assert est.static_cluster_ >= 0
     assert any(w.filename == __file__ for w in caught)
 

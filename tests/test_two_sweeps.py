@@ -244,6 +244,9 @@ def test_voxel_islands_join_close_points_and_split_far_ones():
     assert n_small == len(np.unique(small[small >= 0]))
 
 
+# The first round's EM here alternates between two labellings of 55 of 4,000 rows (the
+# second round settles at once): a ConvergenceWarning that this test is not about.
+@pytest.mark.filterwarnings("ignore:The EM did not settle")
 def test_raw_static_world_keeps_the_ego_motion_exactly():
     a, _, labels, rotations, translations, sweep = make_pair()
     est = _estimator().fit(a, sweep=sweep)

@@ -118,7 +118,8 @@ def tau_components(points, tau, groups=None):
     groups = np.zeros(n, dtype=np.int64) if groups is None else np.asarray(groups, dtype=np.int64)
     if n == 0:
         return 0, np.zeros(0, dtype=np.intp)
-    if d == 0:
+    if d == 0 or math.isinf(tau):
+        # No gap is too wide (no gate, tau=None upstream): each group is one component.
         _, groups_compact = np.unique(groups, return_inverse=True)
         return int(groups_compact.max()) + 1, groups_compact.astype(np.intp)
     if d > _MAX_GRID_DIM:

@@ -377,7 +377,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     A box moved by (0.3, 0.1, 0) and sampled again; the correspondences carry a 10% bias.
 
     >>> import numpy as np
-    >>> from mmreg import SweepRegistration
+    >>> from mmreg import MultiModelRegistration, SweepRegistration
     >>> rng = np.random.default_rng(0)
     >>> def box(n):
     ...     p = rng.uniform(-1, 1, (n, 3))
@@ -385,7 +385,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     ...     return p
     >>> a, sweep = box(2000), box(8000) + [0.3, 0.1, 0.0]
     >>> X = np.hstack([a, a + [0.27, 0.09, 0.0]])
-    >>> est = SweepRegistration(refine="all", max_distance=0.5, random_state=0)
+    >>> em = MultiModelRegistration(tau=1.0)  # a gate for a 2 m box, not a street
+    >>> est = SweepRegistration(em, refine="all", max_distance=0.5, random_state=0)
     >>> est = est.fit(X, sweep=sweep)
     >>> est.n_clusters_, np.round(est.translations_[0], 3) + 0.0
     (1, array([0.3, 0.1, 0. ]))

@@ -1,5 +1,7 @@
 """Turn the ``init`` parameter of a registration estimator into initial labels."""
 
+import warnings
+
 import numpy as np
 from sklearn.base import clone
 from sklearn.utils._param_validation import HasMethods, StrOptions
@@ -65,6 +67,16 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None, neighbo
     -------
     labels : ndarray of shape (n,)
     """
+    if isinstance(init, str):
+        # The shortcut's 100 clusters are an upper bound the user never asked for: a small
+        # scene that holds fewer is clustered as finely as it allows, without a warning.
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="No radius tried gives")
+            return _labels_from(init, X, random_state, n_jobs, tau, neighbours)
+    return _labels_from(init, X, random_state, n_jobs, tau, neighbours)
+
+
+def _labels_from(init, X, random_state, n_jobs, tau, neighbours):
     n, n_columns = X.shape
     if isinstance(init, str):
         makers = _shortcuts(tau)
