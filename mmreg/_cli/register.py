@@ -248,6 +248,14 @@ VIEWS = ("auto", "street", "3d", "top", "bev", "camera")
 
 
 def add_arguments(parser):
+    """Every option of ``mmreg register``, in the groups its help shows."""
+    _add_input(parser)
+    _add_sweep_options(parser)
+    _add_fit_options(parser)
+    _add_output_options(parser)
+
+
+def _add_input(parser):
     parser.add_argument(
         "input",
         metavar="INPUT",
@@ -265,6 +273,9 @@ def add_arguments(parser):
         "refines the motions on it, or, with points alone as INPUT, registers the two raw "
         "sweeps",
     )
+
+
+def _add_sweep_options(parser):
     sweeps = parser.add_argument_group(
         "two sweeps", "lengths in the units of the points; 'auto' derives them from --tau"
     )
@@ -330,6 +341,9 @@ def add_arguments(parser):
         metavar="SECONDS",
         help="seconds between the two sweeps' reference times (e.g. 0.1 at 10 Hz)",
     )
+
+
+def _add_fit_options(parser):
     parser.add_argument(
         "--init",
         default=None,
@@ -382,6 +396,9 @@ def add_arguments(parser):
         help="threads of the k-d tree queries of the initial clustering and the EM "
         "(MultiModelRegistration's n_jobs; -1: every core)",
     )
+
+
+def _add_output_options(parser):
     parser.add_argument(
         "--out",
         metavar="DIR",
