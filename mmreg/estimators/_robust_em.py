@@ -5,26 +5,33 @@ correspondence to its most likely cluster within the gate); the named steps of
 :mod:`mmreg.estimators._robust_steps` sit between its lines:
 
 1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member, each
-   cluster with a robust noise scale of its own;
-2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`);
-3. the static world (:func:`merge_static_world`): the dominant motion gathers every
-   piece that moves with it, however far apart, into one cluster that the gate of eq. (7)
-   admits everywhere;
-4. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
+   cluster with a robust noise scale of its own (``"trimming"``; the first iteration
+   also estimates the noise's growth with range, ``"range_noise"``);
+2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`,
+   ``"merging"``);
+3. the static world (:func:`merge_static_world`, ``"static_world"``): the dominant
+   motion gathers every piece that moves with it, however far apart, into one cluster
+   that the gate of eq. (7) admits everywhere;
+4. in the sweep variant, touching moving pieces whose motions agree joined into one
+   object (:func:`join_moving_pieces`, ``"moving_pieces"``);
+5. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
    in the sweep variant, clusters whose members lie scattered among other clusters'
-   points (:func:`scattered_clusters`): neither has a body of its own (the static
-   world and its slow pieces, which lie among its points, are never dissolved);
-5. removal of small clusters (Algorithm 1, lines 10-13);
-6. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
+   points (:func:`scattered_clusters`), ``"boundary_layers"``: neither has a body of
+   its own (the static world and its slow pieces, which lie among its points, are never
+   dissolved);
+6. removal of small clusters (Algorithm 1, lines 10-13);
+7. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
    correspondence's noise scale ``sigma_j g_i`` growing with its range when the data say
-   so (:func:`estimate_range_growth`);
-7. the outlier component (:func:`reject_outliers`);
-8. new clusters from what no cluster explains (:func:`propose_clusters`): this is also
-   how a cluster holding two motions splits, since the trimmed M-step fits the majority
-   and leaves the other motion's correspondences unexplained.
+   so (:func:`estimate_range_growth`, ``"range_noise"``);
+8. the outlier component (:func:`reject_outliers`, ``"outliers"``);
+9. new clusters from what no cluster explains (:func:`propose_clusters`,
+   ``"proposals"``): this is also how a cluster holding two motions splits, since the
+   trimmed M-step fits the majority and leaves the other motion's correspondences
+   unexplained.
 
-Each step but the E-step can be turned off (``skip_steps``, for ablations); with all of
-them off the loop is Algorithm 1 with the static world's gate still in place.
+Each step but the E-step and the removal of small clusters can be turned off by its
+name (``skip_steps``, for ablations); with all of them off the loop is Algorithm 1 with
+the static world's gate still in place.
 
 Each step is a small function of the fit's setting (:class:`_Setting`: the
 correspondences and the options, never changed) and of the loop's state
@@ -317,14 +324,18 @@ def robust_multi_model_em(
             if _settle(setting, state):
                 state.converged = True
                 break
-    pieces = _clean_up(setting, state)
-    labels, n_clusters, static = state.labels, state.n_clusters, state.static
-    models = state.models
-    moving = _moving(models, static, min_motion)
+    return _result(setting, state, _clean_up(setting, state))
+
+
+def _result(setting, state, pieces):
+    """:class:`RobustEMResult` of the cleaned-up state."""
+    labels, n_clusters, static, models = state.labels, state.n_clusters, state.static, state.models
+    moving = _moving(models, static, setting.min_motion)
     weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), setting.n)
-    if verbose and state.n_iter:
+    if setting.verbose and state.n_iter:
         # After the clean-up: the clusters of the result, not the loop's pieces.
         print(f"result: clusters {n_clusters}")
+    log_outlier = np.log(max(np.mean(labels < 0), 1.0 / max(setting.n, 1)))
     return RobustEMResult(
         labels,
         models.rotations,
@@ -334,9 +345,7 @@ def robust_multi_model_em(
         state.n_iter,
         state.converged,
         state.history,
-        float(
-            np.log(max(np.mean(labels < 0), 1.0 / max(setting.n, 1))) + setting.log_volume_density
-        ),
+        float(log_outlier + setting.log_volume_density),
         float(state.growth) if state.noise_scale is not None else 0.0,
         static,
         moving,
