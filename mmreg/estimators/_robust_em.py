@@ -504,11 +504,15 @@ class _LoopState:
     """The clusters kept by :func:`_drop_small_clusters` (-1 for each proposal after)."""
     weights: np.ndarray = None
     before_e_step: np.ndarray = None
+    """The members the E-step started from (did the static world hold its own?)."""
     static: int = -1
+    """The static world's cluster (-1: none)."""
     slow: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.intp))
+    """The static world's slow pieces: apart in the loop, reported with it."""
     reference: tuple = None
     """The static world's motion ``(R, t)``, once there is one."""
     noise_scale: np.ndarray = None
+    """Each correspondence's relative noise scale ``g_i`` (None: all 1)."""
     growth: float = 0.0
     outlier_share: float = None
     log_outlier: float = None
