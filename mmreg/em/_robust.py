@@ -5,26 +5,40 @@ correspondence to its most likely cluster within the gate); the named steps of
 :mod:`mmreg.em._steps` sit between its lines:
 
 1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member, each
-   cluster with a robust noise scale of its own;
-2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`);
-3. the static world (:func:`merge_static_world`): the dominant motion gathers every
-   piece that moves with it, however far apart, into one cluster that the gate of eq. (7)
-   admits everywhere;
-4. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
+   cluster with a robust noise scale of its own (``"trimming"``; the first iteration
+   also estimates the noise's growth with range, ``"range_noise"``);
+2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`,
+   ``"merging"``);
+3. the static world (:func:`merge_static_world`, ``"static_world"``): the dominant
+   motion gathers every piece that moves with it, however far apart, into one cluster
+   that the gate of eq. (7) admits everywhere;
+4. in the sweep variant, touching moving pieces whose motions agree joined into one
+   object (:func:`join_moving_pieces`, ``"moving_pieces"``);
+5. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
    in the sweep variant, clusters whose members lie scattered among other clusters'
-   points (:func:`scattered_clusters`): neither has a body of its own (the static
-   world and its slow pieces, which lie among its points, are never dissolved);
-5. removal of small clusters (Algorithm 1, lines 10-13);
-6. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
+   points (:func:`scattered_clusters`), ``"boundary_layers"``: neither has a body of
+   its own (the static world and its slow pieces, which lie among its points, are never
+   dissolved);
+6. removal of small clusters (Algorithm 1, lines 10-13);
+7. the E-step and classification of eq. (7) (:func:`assign_correspondences`), with each
    correspondence's noise scale ``sigma_j g_i`` growing with its range when the data say
-   so (:func:`estimate_range_growth`);
-7. the outlier component (:func:`reject_outliers`);
-8. new clusters from what no cluster explains (:func:`propose_clusters`): this is also
-   how a cluster holding two motions splits, since the trimmed M-step fits the majority
-   and leaves the other motion's correspondences unexplained.
+   so (:func:`estimate_range_growth`, ``"range_noise"``);
+8. the outlier component (:func:`reject_outliers`, ``"outliers"``);
+9. new clusters from what no cluster explains (:func:`propose_clusters`,
+   ``"proposals"``): this is also how a cluster holding two motions splits, since the
+   trimmed M-step fits the majority and leaves the other motion's correspondences
+   unexplained.
 
-Each step but the E-step can be turned off (``skip_steps``, for ablations); with all of
-them off the loop is Algorithm 1 with the static world's gate still in place.
+Each step but the E-step and the removal of small clusters can be turned off by its
+name (``skip_steps``, for ablations); with all of them off the loop is Algorithm 1 with
+the static world's gate still in place.
+
+Each step is a small function of the fit's setting (:class:`_Setting`: the
+correspondences and the options, never changed) and of the loop's state
+(:class:`_LoopState`: the clusters, their models, the static world, the noise scale),
+and turns itself off when ``skip_steps`` names it; :func:`robust_multi_model_em` is the
+loop over them, one line a step. The final clean-up (:func:`_clean_up`) runs steps 1-6
+once more, with the static world's slow pieces folded into it.
 """
 
 from dataclasses import dataclass, field
@@ -265,24 +279,160 @@ def robust_multi_model_em(
     -------
     RobustEMResult
     """
+    setting = _setting(
+        a,
+        b,
+        tau=tau,
+        min_cluster_size=min_cluster_size,
+        sigma_floor=sigma_floor,
+        confidence=confidence,
+        n_hypotheses=n_hypotheses,
+        noise_model=noise_model,
+        static_share=static_share,
+        min_motion=min_motion,
+        motion_tolerance=motion_tolerance,
+        tol=tol,
+        skip_steps=skip_steps,
+        sweep=sweep,
+        neighbours=neighbours,
+        random_state=random_state,
+        verbose=verbose,
+        workers=workers,
+    )
+    labels, n_clusters = _compact_initial(init_labels)
+    state = _LoopState(labels, n_clusters, report=labels, own_scales=sweep)
+    with single_threaded_blas():
+        for _ in range(max_iter):
+            if state.n_clusters == 0:
+                state.converged = True  # nothing left to fit, merge or assign to
+                break
+            state.start_iteration()
+            _m_step(setting, state)  # 1. (trimming)
+            if state.n_iter == 1:
+                _first_estimates(setting, state)  # (range_noise)
+            _merge_adjacent(setting, state)  # 2. (merging)
+            _static_world(setting, state)  # 3. (static_world)
+            _join_moving_pieces(setting, state)  # 4. (moving_pieces)
+            _dissolve_layers(setting, state)  # 5. (boundary_layers)
+            _drop_small_clusters(setting, state)  # 6.
+            _e_step(setting, state)  # 7.
+            _reject_outliers(setting, state)  # 8. (outliers)
+            _hold_static_motion(setting, state)
+            _propose_clusters(setting, state)  # 9. (proposals)
+            _dissolve_proposed_layers(setting, state)  # (boundary_layers)
+            _update_range_noise(setting, state)  # (range_noise)
+            if _settle(setting, state):
+                state.converged = True
+                break
+    return _result(setting, state, _clean_up(setting, state))
+
+
+def _result(setting, state, pieces):
+    """:class:`RobustEMResult` of the cleaned-up state."""
+    labels, n_clusters, static, models = state.labels, state.n_clusters, state.static, state.models
+    moving = _moving(models, static, setting.min_motion)
+    weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), setting.n)
+    if setting.verbose and state.n_iter:
+        # After the clean-up: the clusters of the result, not the loop's pieces.
+        print(f"result: clusters {n_clusters}")
+    log_outlier = np.log(max(np.mean(labels < 0), 1.0 / max(setting.n, 1)))
+    return RobustEMResult(
+        labels,
+        models.rotations,
+        models.translations,
+        models.sigmas,
+        weights,
+        state.n_iter,
+        state.converged,
+        state.history,
+        float(log_outlier + setting.log_volume_density),
+        float(state.growth) if state.noise_scale is not None else 0.0,
+        static,
+        moving,
+        pieces,
+    )
+
+
+@dataclass(frozen=True)
+class _Setting:
+    """What the loop reads and never changes: the correspondences, the options as the
+    steps read them, and what is listed once (neighbours, spacing, Morton order)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    tau: object  # float or None
+    min_cluster_size: int
+    sigma_floor: float
+    confidence: float
+    """The inlier quantile of the proposals' tests and of the static world's tail."""
+    trim_confidence: float
+    """The trimmed M-step's inlier quantile (1: every member, ``trimming`` off)."""
+    n_hypotheses: int
+    share: object
+    """The static world's least share of the clustered correspondences (None: none)."""
+    min_motion: float
+    motion_tolerance: object
+    """Joins moving pieces whose motions agree within it (None: never joined)."""
+    max_outlier_weight: float
+    tol: float
+    sweep: bool
+    skip_steps: frozenset
+    range_noise: bool
+    """Whether the noise grows with range (``noise_model="range"``, ``range_noise``)."""
+    neighbours: object
+    spacing: object
+    order: np.ndarray
+    log_volume_density: float
+    rng: object
+    workers: int
+    verbose: int
+
+    @property
+    def n(self):
+        return len(self.a)
+
+    @property
+    def d(self):
+        return self.a.shape[1]
+
+    def runs(self, step):
+        """Whether the step of :data:`ROBUST_STEPS` named ``step`` is on."""
+        return step not in self.skip_steps
+
+
+def _setting(
+    a,
+    b,
+    *,
+    tau,
+    min_cluster_size,
+    sigma_floor,
+    confidence,
+    n_hypotheses,
+    noise_model,
+    static_share,
+    min_motion,
+    motion_tolerance,
+    tol,
+    skip_steps,
+    sweep,
+    neighbours,
+    random_state,
+    verbose,
+    workers,
+):
+    """:class:`_Setting` of :func:`robust_multi_model_em`'s arguments, checked."""
     unknown = set(skip_steps) - set(ROBUST_STEPS)
     if unknown:
         raise ValueError(f"Unknown steps {sorted(unknown)}; the steps are {ROBUST_STEPS}.")
     run = {step: step not in skip_steps for step in ROBUST_STEPS}
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    n, d = a.shape
     rng = check_random_state(random_state)
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
-    confidence_trim = confidence if run["trimming"] else 1.0
     share = static_share if sweep and run["static_world"] else None
     join_pieces = joins_moving_pieces(sweep, skip_steps, motion_tolerance)
-    max_outlier_weight = _MAX_OUTLIER_WEIGHT if sweep else 1.0
-    labels, n_clusters = _compact_initial(init_labels)
-    report_before = labels
-    log_volume_density = log_uniform_density(a, b)
-    order = morton_order(np.ascontiguousarray(a.T))
     if not reads_neighbours(skip_steps):
         neighbours = None
     elif neighbours is None:
@@ -295,308 +445,476 @@ def robust_multi_model_em(
         if run["boundary_layers"]
         else None
     )
-    history = []
-    converged = False
-    n_iter = 0
-    outlier_share = None
-    noise_scale = None
-    growth = 0.0
-    static = -1
-    reference = None  # the static world's motion, once there is one
-    # A noise scale of its own is bounded by a cluster's motion relative to the static
-    # world (a network errs in proportion to it); without a static world nothing bounds
-    # it, and a few wrong correspondences near each other pass for an object with a
-    # large noise of its own: one shared scale then. The first iteration has not looked
-    # for a static world yet.
-    own_scales = sweep
-
-    def layers_of(labels, n_clusters, world):
-        # The static world's clusters (it and its slow pieces, which are reported with
-        # it and lie among its points) are never layers.
-        layers = boundary_layers(
-            a,
-            labels,
-            n_clusters,
-            spacing,
-            exempt=world,
-            neighbours=neighbours,
-            ignore_strays=sweep,
-        )
-        if not sweep:
-            return layers
-        # With a noise scale of their own, a few scattered wrong flows can hold a motion.
-        scattered = scattered_clusters(labels, n_clusters, neighbours, exempt=world)
-        return np.union1d(layers, scattered)
-
-    def fit(labels, n_clusters):
-        return trimmed_fit(
-            a,
-            b,
-            labels,
-            n_clusters,
-            sigma_floor,
-            noise_scale,
-            confidence=confidence_trim,
-            per_cluster=own_scales,
-            max_noise_ratio=_MAX_NOISE_RATIO if sweep else None,
-            reference=reference,
-        )
-
-    with single_threaded_blas():
-        for _ in range(max_iter):
-            if n_clusters == 0:
-                # Nothing left to fit, merge or assign to.
-                converged = True
-                break
-            n_iter += 1
-            # 1. M-step on inliers. The noise's growth with range comes from the last
-            # iteration's clusters; the first estimates it from the initial ones.
-            inliers, models = fit(labels, n_clusters)
-            if run["range_noise"] and noise_model == "range" and n_iter == 1:
-                growth, noise_scale = _range_noise(a, b, inliers, models, sigma_floor, sweep)
-                if noise_scale is not None:
-                    inliers, models = fit(labels, n_clusters)
-            if outlier_share is None:
-                outlier_share = np.mean(inliers < 0)
-            # 2. Merge adjacent clusters that share a motion.
-            root, n_merges = np.arange(n_clusters), 0
-            if run["merging"]:
-                pairs = adjacent_pairs(a, inliers, n_clusters, tau)
-                root, models, n_merges = merge_adjacent(models, pairs, d, sigma_floor)
-            # 3. The static world: every piece that moves with it, however far.
-            static, models, root, n_static, slow = _gather_static_world(
-                models, root, d, sigma_floor, share, min_motion
-            )
-            members = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
-            # 4. Pieces of one moving object whose flow bends with the motion.
-            n_joined = 0
-            if join_pieces:
-                joined, models, n_joined = join_moving_pieces(
-                    a,
-                    members,
-                    models,
-                    static,
-                    d,
-                    sigma_floor,
-                    tolerance=motion_tolerance,
-                    neighbours=neighbours,
-                    workers=workers,
-                )
-                members = np.where(members >= 0, joined[np.maximum(members, 0)], -1)
-            # 5. Dissolve layers of flow that bled along another cluster's boundary.
-            bled = []
-            if run["boundary_layers"]:
-                bled = layers_of(members, n_clusters, np.append(slow, static))
-                members[np.isin(members, bled)] = -1
-            # 6. Drop clusters below m_min (lines 10-13); merged-away ones have no members.
-            counts = np.bincount(members[members >= 0], minlength=n_clusters)
-            own, kept = drop_small_clusters(members, counts, min_cluster_size)
-            static = _position(kept, static)
-            models = models.take(kept)
-            weights = _weights(counts[kept], n)
-            # 7. E-step and classification of eq. (7), gated by tau but for the static world.
-            gate = ClusterGate(
-                a, own, len(kept), tau, ungated=[static] if static >= 0 else [], workers=workers
-            )
-            new = assign_correspondences(
-                a,
-                b,
-                models.rotations,
-                models.translations,
-                models.sigmas,
-                weights,
-                gate,
-                own,
-                order,
-                noise_scale,
-            )
-            # 8. The outlier component.
-            outlier_weight = min(max(outlier_share, 1.0 / n), max_outlier_weight)
-            log_outlier = np.log(outlier_weight) + log_volume_density
-            if run["outliers"]:
-                new = reject_outliers(
-                    a,
-                    b,
-                    new,
-                    models.rotations,
-                    models.translations,
-                    models.sigmas,
-                    weights,
-                    log_outlier,
-                    noise_scale,
-                )
-            outlier_share = np.mean(new < 0)
-            if static >= 0:
-                reference = (models.rotations[static], models.translations[static])
-            own_scales = sweep and static >= 0
-            # 9. New clusters from the unexplained correspondences. Their hypotheses turn
-            # like the static world, unless the E-step took most of its members from
-            # it: then its motion was the mean of several (initial clusters that mix
-            # motions, fitted by least squares) and would turn every hypothesis wrong.
-            anchored = _holds_its_members(static, own, new)
-            found = []
-            if run["proposals"]:
-                smallest = float(np.min(models.sigmas)) if len(kept) else sigma_floor
-                found = propose_clusters(
-                    a,
-                    b,
-                    _unexplained(a, b, new, static, models, noise_scale, confidence),
-                    tau if tau is not None else np.inf,
-                    smallest,
-                    log_outlier,
-                    n,
-                    rng,
-                    log_volume_density=log_volume_density,
-                    models=models,
-                    min_cluster_size=min_cluster_size,
-                    sigma_floor=sigma_floor,
-                    noise_scale=noise_scale,
-                    n_hypotheses=n_hypotheses,
-                    confidence=confidence,
-                    reference=reference if anchored else None,
-                    per_cluster=sweep,
-                    # Without scales of their own, the next M-step holds a proposal to
-                    # the clusters' shared scale: it may take no wider one.
-                    max_scale=None if own_scales else smallest,
-                )
-            for group in found:
-                new[group] = len(kept)
-                kept = np.append(kept, -1)
-            # The slow clusters' positions among the kept ones (proposals are not).
-            slow_kept = np.flatnonzero(np.isin(kept, slow))
-            if run["boundary_layers"] and found:
-                # A proposal along another cluster's boundary is bled flow too.
-                layers = layers_of(new, len(kept), np.append(slow_kept, static))
-                first_new = len(models.sigmas)
-                found = [f for k, f in enumerate(found) if first_new + k not in layers]
-                new[np.isin(new, layers[layers >= first_new])] = -1
-            step = {
-                "iteration": n_iter,
-                # Clusters as reported (set below), and the pieces the loop keeps apart
-                # (slow pieces of the static world, pieces the clean-up may join).
-                "clusters": 0,
-                "pieces": int(len(kept)),
-                "merges": int(n_merges),
-                "static_pieces": int(n_static),
-                "joined": int(n_joined),
-                "bled": len(bled),
-                "dropped": int(np.count_nonzero((counts > 0) & (counts < min_cluster_size))),
-                "outliers": int(np.count_nonzero(new < 0)),
-                "proposed": len(found),
-                "noise_growth": float(growth) if noise_scale is not None else 0.0,
-            }
-            history.append(step)
-            if run["range_noise"] and noise_model == "range" and len(models.sigmas):
-                growth, noise_scale = _range_noise(a, b, new, models, sigma_floor, sweep)
-            # A change of the clusters reported, not of their numbers (compacting
-            # renumbers them) nor inside the static world (slow pieces are reported
-            # with it, and a network's flow moves points between them for ever).
-            # Slow clusters are reported with the static world they belong to.
-            report = np.where(np.isin(new, slow_kept), static, new) if static >= 0 else new
-            if static >= 0 and found:
-                # A slow proposal will be reported with the static world, as a slow
-                # cluster; reported apart now, it would count as moved twice.
-                slowly = moves_slowly(a, b, found, reference, sigma_floor, min_motion, noise_scale)
-                if slowly.any():
-                    report = report.copy()
-                    report[np.concatenate(list(compress(found, slowly)))] = static
-            step["clusters"] = int(np.count_nonzero(np.bincount(report[report >= 0])))
-            n_changed = rows_moved(report_before, report)
-            report_before = report
-            new, n_clusters = _compact_initial(new)
-            step["changed"] = n_changed
-            if verbose:
-                print(", ".join(f"{key} {value:g}" for key, value in step.items()))
-            labels = new
-            # Merges, proposals and joined pieces count by the correspondences they move.
-            if n_changed <= tol * n:
-                converged = True
-                break
-    # Final clean-up: one more merge, the static world gathered, no boundary layer and
-    # no cluster below m_min; numbered by size. With max_iter=0 the initial clusters are
-    # returned as given (the paper's contract).
-    pieces = None
-    if n_iter and n_clusters:
-        inliers, models = fit(labels, n_clusters)
-        root = np.arange(n_clusters)
-        if run["merging"]:
-            pairs = adjacent_pairs(a, inliers, n_clusters, tau)
-            root, models, _ = merge_adjacent(models, pairs, d, sigma_floor)
-        static, models, root, _, slow = _gather_static_world(
-            models, root, d, sigma_floor, share, min_motion
-        )
-        pieces = Pieces(
-            a,
-            np.where(labels >= 0, root[np.maximum(labels, 0)], -1),
-            models.take(np.arange(n_clusters)),
-            None,
-            static,
-        )
-        # Slow clusters are reported as the static world they belong to.
-        root[np.isin(root, slow)] = static
-        labels = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
-        became = root.copy()  # what each piece became, through the steps below
-        if join_pieces:
-            joined, models, _ = join_moving_pieces(
-                a,
-                labels,
-                models,
-                static,
-                d,
-                sigma_floor,
-                tolerance=motion_tolerance,
-                neighbours=neighbours,
-                workers=workers,
-            )
-            labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
-            became = joined[became]
-        if run["boundary_layers"]:
-            bled = layers_of(labels, n_clusters, [static])
-            labels = np.where(np.isin(labels, bled), -1, labels)
-            became[np.isin(became, bled)] = -1
-    counts = np.bincount(labels[labels >= 0], minlength=n_clusters)
-    labels, kept = drop_small_clusters(labels, counts, min_cluster_size)
-    static = _position(kept, static) if n_iter else -1
-    rank = _size_rank(labels, len(kept))
-    labels = rank[labels]
-    if pieces is not None:
-        pieces.reported = rank[drop_small_clusters(became, counts, min_cluster_size)[0]]
-    n_clusters = len(kept)
-    static = int(rank[static]) if static >= 0 else -1
-    _, models = fit(labels, n_clusters)
-    if sweep and n_iter and n_clusters and run["outliers"]:
-        labels = _readmit_outliers(
-            a,
-            b,
-            labels,
-            models,
-            static,
-            tau,
-            noise_scale,
-            outlier_share,
-            log_volume_density,
-            workers,
-        )
-    moving = _moving(models, static, min_motion)
-    weights = _weights(np.bincount(labels[labels >= 0], minlength=n_clusters), n)
-    if verbose and n_iter:
-        # After the clean-up: the clusters of the result, not the loop's pieces.
-        print(f"result: clusters {n_clusters}")
-    return RobustEMResult(
-        labels,
-        models.rotations,
-        models.translations,
-        models.sigmas,
-        weights,
-        n_iter,
-        converged,
-        history,
-        float(np.log(max(np.mean(labels < 0), 1.0 / max(n, 1))) + log_volume_density),
-        float(growth) if noise_scale is not None else 0.0,
-        static,
-        moving,
-        pieces,
+    return _Setting(
+        a=a,
+        b=b,
+        tau=tau,
+        min_cluster_size=min_cluster_size,
+        sigma_floor=sigma_floor,
+        confidence=confidence,
+        trim_confidence=confidence if run["trimming"] else 1.0,
+        n_hypotheses=n_hypotheses,
+        share=share,
+        min_motion=min_motion,
+        motion_tolerance=motion_tolerance if join_pieces else None,
+        max_outlier_weight=_MAX_OUTLIER_WEIGHT if sweep else 1.0,
+        tol=tol,
+        sweep=sweep,
+        skip_steps=frozenset(skip_steps),
+        range_noise=run["range_noise"] and noise_model == "range",
+        neighbours=neighbours,
+        spacing=spacing,
+        order=morton_order(np.ascontiguousarray(a.T)),
+        log_volume_density=log_uniform_density(a, b),
+        rng=rng,
+        workers=workers,
+        verbose=verbose,
     )
+
+
+# What the steps of one iteration count, for its line of the history.
+_TALLIED = ("merges", "static_pieces", "joined", "bled", "dropped", "noise_growth")
+
+
+@dataclass
+class _LoopState:
+    """What the loop's steps pass on: the clusters, their models, the static world and
+    the noise scale."""
+
+    labels: np.ndarray
+    """Each correspondence's cluster when the iteration starts (-1: none)."""
+    n_clusters: int
+    report: np.ndarray
+    """The clusters the last iteration reported, which convergence compares with."""
+    own_scales: bool
+    """Whether the M-step fits each cluster a noise scale of its own. A noise scale of
+    its own is bounded by a cluster's motion relative to the static world (a network
+    errs in proportion to it); without a static world nothing bounds it, and a few
+    wrong correspondences near each other pass for an object with a large noise of its
+    own: one shared scale then. The first iteration has not looked for a static world
+    yet."""
+    members: np.ndarray = None
+    """Each correspondence's cluster through the steps of the iteration."""
+    root: np.ndarray = None
+    """What each of the ``n_clusters`` became through the steps (-1: dissolved)."""
+    models: object = None
+    inliers: np.ndarray = None
+    counts: np.ndarray = None
+    kept: np.ndarray = None
+    """The clusters kept by :func:`_drop_small_clusters` (-1 for each proposal after)."""
+    weights: np.ndarray = None
+    before_e_step: np.ndarray = None
+    """The members the E-step started from (did the static world hold its own?)."""
+    static: int = -1
+    """The static world's cluster (-1: none)."""
+    slow: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.intp))
+    """The static world's slow pieces: apart in the loop, reported with it."""
+    reference: tuple = None
+    """The static world's motion ``(R, t)``, once there is one."""
+    noise_scale: np.ndarray = None
+    """Each correspondence's relative noise scale ``g_i`` (None: all 1)."""
+    growth: float = 0.0
+    outlier_share: float = None
+    log_outlier: float = None
+    found: list = field(default_factory=list)
+    n_iter: int = 0
+    converged: bool = False
+    history: list = field(default_factory=list)
+    tally: dict = field(default_factory=dict)
+
+    def start_iteration(self):
+        self.n_iter += 1
+        self.tally = dict.fromkeys(_TALLIED, 0)
+
+
+def _through(mapping, labels):
+    """``labels`` mapped cluster by cluster through ``mapping`` (-1 stays -1)."""
+    return np.where(labels >= 0, mapping[np.maximum(labels, 0)], -1)
+
+
+def _fit(setting, state, labels, n_clusters):
+    """The trimmed M-step of ``labels``: each cluster's motion and noise scale fitted on
+    its inliers."""
+    return trimmed_fit(
+        setting.a,
+        setting.b,
+        labels,
+        n_clusters,
+        setting.sigma_floor,
+        state.noise_scale,
+        confidence=setting.trim_confidence,
+        per_cluster=state.own_scales,
+        max_noise_ratio=_MAX_NOISE_RATIO if setting.sweep else None,
+        reference=state.reference,
+    )
+
+
+def _m_step(setting, state):
+    """1. The M-step on inliers (``trimming``: off, on every member)."""
+    state.inliers, state.models = _fit(setting, state, state.labels, state.n_clusters)
+
+
+def _first_estimates(setting, state):
+    """The first iteration's noise growth with range (``range_noise``), from the initial
+    clusters, and the M-step again with it; and the outlier share, the share of the
+    correspondences the M-step trimmed."""
+    if setting.range_noise:
+        state.growth, state.noise_scale = _range_noise(
+            setting.a, setting.b, state.inliers, state.models, setting.sigma_floor, setting.sweep
+        )
+        if state.noise_scale is not None:
+            _m_step(setting, state)
+    state.outlier_share = np.mean(state.inliers < 0)
+
+
+def _merge_adjacent(setting, state):
+    """2. Adjacent clusters that share a motion merged (``merging``)."""
+    state.root = np.arange(state.n_clusters)
+    if setting.runs("merging"):
+        pairs = adjacent_pairs(setting.a, state.inliers, state.n_clusters, setting.tau)
+        state.root, state.models, state.tally["merges"] = merge_adjacent(
+            state.models, pairs, setting.d, setting.sigma_floor
+        )
+
+
+def _static_world(setting, state):
+    """3. The static world (``static_world``, sweep variant): every piece that moves with
+    it, however far."""
+    state.static, state.models, state.root, state.tally["static_pieces"], state.slow = (
+        _gather_static_world(
+            state.models,
+            state.root,
+            setting.d,
+            setting.sigma_floor,
+            setting.share,
+            setting.min_motion,
+        )
+    )
+    state.members = _through(state.root, state.labels)
+
+
+def _join_moving_pieces(setting, state):
+    """4. Touching pieces of one moving object whose flow bends with the motion joined
+    (``moving_pieces``, sweep variant)."""
+    if setting.motion_tolerance is None:
+        return
+    joined, state.models, state.tally["joined"] = join_moving_pieces(
+        setting.a,
+        state.members,
+        state.models,
+        state.static,
+        setting.d,
+        setting.sigma_floor,
+        tolerance=setting.motion_tolerance,
+        neighbours=setting.neighbours,
+        workers=setting.workers,
+    )
+    state.members = _through(joined, state.members)
+    state.root = joined[state.root]
+
+
+def _layers(setting, labels, n_clusters, world):
+    """The clusters of ``labels`` without a body of their own: layers of flow that bled
+    along another cluster's boundary and, in the sweep variant, scattered clusters. The
+    static world's clusters (``world``: it and its slow pieces, which are reported with it
+    and lie among its points) are never layers."""
+    layers = boundary_layers(
+        setting.a,
+        labels,
+        n_clusters,
+        setting.spacing,
+        exempt=world,
+        neighbours=setting.neighbours,
+        ignore_strays=setting.sweep,
+    )
+    if not setting.sweep:
+        return layers
+    # With a noise scale of their own, a few scattered wrong flows can hold a motion.
+    scattered = scattered_clusters(labels, n_clusters, setting.neighbours, exempt=world)
+    return np.union1d(layers, scattered)
+
+
+def _dissolve_layers(setting, state):
+    """5. Layers of flow that bled along another cluster's boundary dissolved
+    (``boundary_layers``)."""
+    if not setting.runs("boundary_layers"):
+        return
+    world = np.append(state.slow, state.static)
+    bled = _layers(setting, state.members, state.n_clusters, world)
+    state.members[np.isin(state.members, bled)] = -1
+    state.root[np.isin(state.root, bled)] = -1
+    state.tally["bled"] = len(bled)
+
+
+def _drop_small_clusters(setting, state):
+    """6. Clusters below m_min dropped (Algorithm 1, lines 10-13), the others numbered
+    in order; merged-away clusters have no members."""
+    state.counts = np.bincount(state.members[state.members >= 0], minlength=state.n_clusters)
+    state.members, state.kept = drop_small_clusters(
+        state.members, state.counts, setting.min_cluster_size
+    )
+    state.root = drop_small_clusters(state.root, state.counts, setting.min_cluster_size)[0]
+    state.static = _position(state.kept, state.static)
+    small = (state.counts > 0) & (state.counts < setting.min_cluster_size)
+    state.tally["dropped"] = int(np.count_nonzero(small))
+
+
+def _e_step(setting, state):
+    """7. The E-step and classification of eq. (7) among the kept clusters, gated by tau
+    but for the static world."""
+    state.models = state.models.take(state.kept)
+    state.weights = _weights(state.counts[state.kept], setting.n)
+    gate = ClusterGate(
+        setting.a,
+        state.members,
+        len(state.kept),
+        setting.tau,
+        ungated=[state.static] if state.static >= 0 else [],
+        workers=setting.workers,
+    )
+    state.before_e_step = state.members
+    state.members = assign_correspondences(
+        setting.a,
+        setting.b,
+        state.models.rotations,
+        state.models.translations,
+        state.models.sigmas,
+        state.weights,
+        gate,
+        state.members,
+        setting.order,
+        state.noise_scale,
+    )
+
+
+def _reject_outliers(setting, state):
+    """8. The outlier component (``outliers``), of the last iteration's outlier share as
+    its weight, capped."""
+    outlier_weight = min(max(state.outlier_share, 1.0 / setting.n), setting.max_outlier_weight)
+    state.log_outlier = np.log(outlier_weight) + setting.log_volume_density
+    if setting.runs("outliers"):
+        state.members = reject_outliers(
+            setting.a,
+            setting.b,
+            state.members,
+            state.models.rotations,
+            state.models.translations,
+            state.models.sigmas,
+            state.weights,
+            state.log_outlier,
+            state.noise_scale,
+        )
+    state.outlier_share = np.mean(state.members < 0)
+
+
+def _hold_static_motion(setting, state):
+    """The static world's motion, kept for the steps that follow and the next M-step
+    (it bounds the clusters' own noise scales and turns the proposals' hypotheses)."""
+    if state.static >= 0:
+        rotations, translations = state.models.rotations, state.models.translations
+        state.reference = (rotations[state.static], translations[state.static])
+    state.own_scales = setting.sweep and state.static >= 0
+
+
+def _propose_clusters(setting, state):
+    """9. New clusters from the unexplained correspondences (``proposals``)."""
+    state.found = []
+    if not setting.runs("proposals"):
+        return
+    # Their hypotheses turn like the static world, unless the E-step took most of its
+    # members from it: then its motion was the mean of several (initial clusters that mix
+    # motions, fitted by least squares) and would turn every hypothesis wrong.
+    anchored = _holds_its_members(state.static, state.before_e_step, state.members)
+    models = state.models
+    smallest = float(np.min(models.sigmas)) if len(state.kept) else setting.sigma_floor
+    state.found = propose_clusters(
+        setting.a,
+        setting.b,
+        _unexplained(
+            setting.a,
+            setting.b,
+            state.members,
+            state.static,
+            models,
+            state.noise_scale,
+            setting.confidence,
+        ),
+        setting.tau if setting.tau is not None else np.inf,
+        smallest,
+        state.log_outlier,
+        setting.n,
+        setting.rng,
+        log_volume_density=setting.log_volume_density,
+        models=models,
+        min_cluster_size=setting.min_cluster_size,
+        sigma_floor=setting.sigma_floor,
+        noise_scale=state.noise_scale,
+        n_hypotheses=setting.n_hypotheses,
+        confidence=setting.confidence,
+        reference=state.reference if anchored else None,
+        per_cluster=setting.sweep,
+        # Without scales of their own, the next M-step holds a proposal to the
+        # clusters' shared scale: it may take no wider one.
+        max_scale=None if state.own_scales else smallest,
+    )
+    for group in state.found:
+        state.members[group] = len(state.kept)
+        state.kept = np.append(state.kept, -1)
+
+
+def _slow_positions(state):
+    """The slow clusters' positions among the kept ones (proposals are not)."""
+    return np.flatnonzero(np.isin(state.kept, state.slow))
+
+
+def _dissolve_proposed_layers(setting, state):
+    """A proposal along another cluster's boundary is bled flow too
+    (``boundary_layers``)."""
+    if not (setting.runs("boundary_layers") and state.found):
+        return
+    world = np.append(_slow_positions(state), state.static)
+    layers = _layers(setting, state.members, len(state.kept), world)
+    first_new = len(state.models.sigmas)
+    state.found = [f for k, f in enumerate(state.found) if first_new + k not in layers]
+    state.members[np.isin(state.members, layers[layers >= first_new])] = -1
+
+
+def _update_range_noise(setting, state):
+    """The noise's growth with range estimated again on this iteration's clusters, for
+    the next M-step (``range_noise``)."""
+    state.tally["noise_growth"] = float(state.growth) if state.noise_scale is not None else 0.0
+    if setting.range_noise and len(state.models.sigmas):
+        state.growth, state.noise_scale = _range_noise(
+            setting.a,
+            setting.b,
+            state.members,
+            state.models,
+            setting.sigma_floor,
+            setting.sweep,
+        )
+
+
+def _reported(setting, state):
+    """The clusters as they would be reported: not their numbers (compacting renumbers
+    them) and not the static world's pieces (slow pieces are reported with it, and a
+    network's flow moves points between them for ever)."""
+    static, found = state.static, state.found
+    if static < 0:
+        return state.members
+    report = np.where(np.isin(state.members, _slow_positions(state)), static, state.members)
+    if found:
+        # A slow proposal will be reported with the static world, as a slow cluster;
+        # reported apart now, it would count as moved twice.
+        slowly = moves_slowly(
+            setting.a,
+            setting.b,
+            found,
+            state.reference,
+            setting.sigma_floor,
+            setting.min_motion,
+            state.noise_scale,
+        )
+        if slowly.any():
+            report = report.copy()
+            report[np.concatenate(list(compress(found, slowly)))] = static
+    return report
+
+
+def _settle(setting, state):
+    """The iteration's line of the history, and the labels compacted for the next one.
+
+    Returns whether the loop converged: at most ``tol`` of the correspondences moved to
+    another reported cluster (merges, proposals and joined pieces count by the
+    correspondences they move).
+    """
+    report = _reported(setting, state)
+    n_changed = rows_moved(state.report, report)
+    state.report = report
+    tally = state.tally
+    step = {
+        "iteration": state.n_iter,
+        # Clusters as reported, and the pieces the loop keeps apart (slow pieces of the
+        # static world, pieces the clean-up may join).
+        "clusters": int(np.count_nonzero(np.bincount(report[report >= 0]))),
+        "pieces": int(len(state.kept)),
+        "merges": int(tally["merges"]),
+        "static_pieces": int(tally["static_pieces"]),
+        "joined": int(tally["joined"]),
+        "bled": tally["bled"],
+        "dropped": tally["dropped"],
+        "outliers": int(np.count_nonzero(state.members < 0)),
+        "proposed": len(state.found),
+        "noise_growth": tally["noise_growth"],
+        "changed": n_changed,
+    }
+    state.history.append(step)
+    if setting.verbose:
+        print(", ".join(f"{key} {value:g}" for key, value in step.items()))
+    state.labels, state.n_clusters = _compact_initial(state.members)
+    return n_changed <= setting.tol * setting.n
+
+
+def _clean_up(setting, state):
+    """The final clean-up: the loop's steps 1-6 once more, with the static world's slow
+    pieces folded into it, then the clusters numbered by size and fitted.
+
+    With ``max_iter=0`` the initial clusters are returned as given (the paper's
+    contract), but for those below m_min.
+
+    Returns
+    -------
+    Pieces or None
+        The clusters before the slow pieces were folded and the moving pieces joined
+        (None without an iteration).
+    """
+    pieces = None
+    if state.n_iter and state.n_clusters:
+        _m_step(setting, state)
+        _merge_adjacent(setting, state)
+        _static_world(setting, state)
+        pieces = _fold_slow_pieces(setting, state)
+        _join_moving_pieces(setting, state)
+        _dissolve_layers(setting, state)
+    else:
+        state.members, state.root = state.labels, np.arange(state.n_clusters)
+    _drop_small_clusters(setting, state)
+    rank = _size_rank(state.members, len(state.kept))
+    state.labels, state.n_clusters = rank[state.members], len(state.kept)
+    if pieces is not None:
+        pieces.reported = rank[state.root]
+    state.static = int(rank[state.static]) if state.static >= 0 else -1
+    _, state.models = _fit(setting, state, state.labels, state.n_clusters)
+    if setting.sweep and state.n_iter and state.n_clusters and setting.runs("outliers"):
+        state.labels = _readmit_outliers(
+            setting.a,
+            setting.b,
+            state.labels,
+            state.models,
+            state.static,
+            setting.tau,
+            state.noise_scale,
+            state.outlier_share,
+            setting.log_volume_density,
+            setting.workers,
+        )
+    return pieces
+
+
+def _fold_slow_pieces(setting, state):
+    """The clean-up's pieces (:class:`Pieces`, what :func:`assign_to_pieces` judges
+    further correspondences by); then the static world's slow pieces folded into it,
+    as they are reported."""
+    pieces = Pieces(
+        setting.a,
+        state.members,
+        state.models.take(np.arange(state.n_clusters)),
+        None,
+        state.static,
+    )
+    state.root[np.isin(state.root, state.slow)] = state.static
+    state.members = _through(state.root, state.labels)
+    state.slow = np.empty(0, dtype=np.intp)
+    return pieces
 
 
 def assign_to_pieces(
