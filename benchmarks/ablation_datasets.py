@@ -27,7 +27,7 @@ import pandas as pd
 
 from mmreg import MultiModelRegistration
 from mmreg.datasets import make_flying_things, make_scene, make_street
-from mmreg.estimators._robust_em import ROBUST_STEPS
+from mmreg.em._robust import ROBUST_STEPS
 from mmreg.metrics import iou_score, objects_found
 
 HERE = Path(__file__).resolve().parent

@@ -29,7 +29,7 @@ import numpy as np
 
 from mmreg import MultiModelRegistration
 from mmreg.datasets import make_flying_things, make_scene, make_street
-from mmreg.estimators._robust_em import ROBUST_STEPS
+from mmreg.em._robust import ROBUST_STEPS
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = Path(os.environ.get("MMREG_REALDATA", HERE.parent.parent / "shared" / "realdata"))

@@ -10,7 +10,7 @@ import pytest
 
 from mmreg import MultiModelRegistration
 from mmreg.datasets import make_scene
-from mmreg.estimators._robust_em import ROBUST_STEPS
+from mmreg.em._robust import ROBUST_STEPS
 
 ROOT = Path(__file__).resolve().parent.parent
 

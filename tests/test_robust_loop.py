@@ -1,4 +1,4 @@
-"""The robust loop's steps alone (:mod:`mmreg.estimators._robust_em`): each reads and
+"""The robust loop's steps alone (:mod:`mmreg.em._robust`): each reads and
 writes one state, and turns itself off by its ``skip_steps`` name."""
 
 import inspect
@@ -6,7 +6,7 @@ import inspect
 import numpy as np
 import pytest
 
-from mmreg.estimators._robust_em import (
+from mmreg.em._robust import (
     _drop_small_clusters,
     _LoopState,
     _m_step,
