@@ -38,6 +38,7 @@ from sklearn.utils import check_random_state
 from mmreg._gate import ClusterGate
 from mmreg._geometry import row_medians
 from mmreg._likelihood import morton_order, single_threaded_blas
+from mmreg._moments import group_moments
 from mmreg._neighbors import NeighbourTable, lookup_tree
 from mmreg._relabelling import rows_moved
 from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
@@ -64,6 +65,7 @@ from mmreg.estimators._robust_steps import (
     stray_members,
     trimmed_fit,
 )
+from mmreg.estimators._static_world import StaticWorldRule, static_world_rule
 
 __all__ = [
     "ROBUST_STEPS",
@@ -202,6 +204,7 @@ def robust_multi_model_em(
     tol=1e-3,
     skip_steps=(),
     sweep=False,
+    ego_motion=None,
     neighbours=None,
     random_state=None,
     verbose=0,
@@ -251,6 +254,10 @@ def robust_multi_model_em(
         proposals that search the noise scale and also try local translations, slow
         movers sought in the static world's tail, and the outlier weight capped at one
         half. False: one shared noise scale and none of these (the robust default).
+    ego_motion : tuple of (ndarray, ndarray) or None, default=None
+        Sweep variant: the static world's motion ``(R, t)`` (``b = R a + t``), when the
+        caller knows it; the static world is then the clusters that move with it
+        (:func:`merge_static_world`), whatever their share.
     neighbours : NeighbourTable or None, default=None
         The a-points' 16 nearest neighbours, if the caller has listed them; None lists
         them here (when the boundary layers step runs, the only one that reads them).
@@ -276,7 +283,9 @@ def robust_multi_model_em(
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
     confidence_trim = confidence if run["trimming"] else 1.0
-    share = static_share if sweep and run["static_world"] else None
+    share = (
+        static_world_rule(static_share, ego_motion, a) if sweep and run["static_world"] else None
+    )
     join_pieces = joins_moving_pieces(sweep, skip_steps, motion_tolerance)
     max_outlier_weight = _MAX_OUTLIER_WEIGHT if sweep else 1.0
     labels, n_clusters = _compact_initial(init_labels)
@@ -365,7 +374,7 @@ def robust_multi_model_em(
                 root, models, n_merges = merge_adjacent(models, pairs, d, sigma_floor)
             # 3. The static world: every piece that moves with it, however far.
             static, models, root, n_static, slow = _gather_static_world(
-                models, root, d, sigma_floor, share, min_motion
+                models, root, d, sigma_floor, share, min_motion, labels
             )
             members = np.where(labels >= 0, root[np.maximum(labels, 0)], -1)
             # 4. Pieces of one moving object whose flow bends with the motion.
@@ -523,7 +532,7 @@ def robust_multi_model_em(
             pairs = adjacent_pairs(a, inliers, n_clusters, tau)
             root, models, _ = merge_adjacent(models, pairs, d, sigma_floor)
         static, models, root, _, slow = _gather_static_world(
-            models, root, d, sigma_floor, share, min_motion
+            models, root, d, sigma_floor, share, min_motion, labels
         )
         pieces = Pieces(
             a,
@@ -951,8 +960,12 @@ def _readmit_outliers(
     return labels
 
 
-def _gather_static_world(models, root, d, sigma_floor, share, min_motion):
+def _gather_static_world(models, root, d, sigma_floor, share, min_motion, labels=None):
     """:func:`merge_static_world` on the clusters left by ``root``; composes the roots.
+
+    ``share``: the static world's rule (:class:`StaticWorldRule`, or the majority share
+    alone), None for no static world; ``labels``: each correspondence's cluster before
+    ``root``, for the clusters' spread on the rule's points.
 
     Returns the static world's cluster (-1 if none), the models, the composed roots, the
     number of merges and the slow clusters (see :func:`merge_static_world`).
@@ -960,9 +973,21 @@ def _gather_static_world(models, root, d, sigma_floor, share, min_motion):
     none = (-1, models, root, 0, np.empty(0, dtype=np.intp))
     if share is None:
         return none
+    rule = share if isinstance(share, StaticWorldRule) else StaticWorldRule(share)
     survivors = np.flatnonzero(root == np.arange(len(root)))
+    geometry = None
+    if rule.points is not None and labels is not None:
+        rows = np.flatnonzero(labels >= 0)
+        points = rule.points[rows]
+        geometry = group_moments(points, points, root[labels[rows]], len(root)).take(survivors)
     static, sub_root, sub_models, n_merges, slow = merge_static_world(
-        models.take(survivors), d, sigma_floor, share=share, min_motion=min_motion
+        models.take(survivors),
+        d,
+        sigma_floor,
+        share=rule.share,
+        min_motion=min_motion,
+        ego_motion=rule.ego_motion,
+        geometry=geometry,
     )
     if static < 0:
         return none
