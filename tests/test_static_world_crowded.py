@@ -48,6 +48,18 @@ def test_a_crowded_scene_names_its_background_whatever_its_share(n_objects, seed
     assert not est.moving_[static] and est.moving_[np.arange(est.n_clusters_) != static].all()
 
 
+def test_an_object_filling_most_of_the_view_is_not_the_static_world():
+    # An object near the camera holds 62 % of the points, the background 11 %: the
+    # majority is an object's, and the background, which spans the scene, wins over it.
+    scene = _crowded(120, 0)
+    background = scene.labels == 0
+    assert np.bincount(scene.labels)[1:].max() > 0.6 * len(scene.labels)
+    assert background.mean() < 0.15
+    est = MultiModelRegistration(tau=5.0, random_state=0).fit(scene.X)
+    assert est.static_cluster_ >= 0
+    np.testing.assert_array_equal(est.labels_ == est.static_cluster_, background)
+
+
 def test_every_object_of_the_crowded_scene_is_still_found():
     scene = _crowded(60, 1)
     ids, counts = np.unique(scene.labels[scene.labels > 0], return_counts=True)

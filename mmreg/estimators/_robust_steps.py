@@ -852,11 +852,13 @@ def merge_static_world(
     clustered correspondences. In a crowded scene no motion does: the static world is
     then the cluster that spans the scene, whatever its share
     (:func:`~mmreg.estimators._static_world.widest_cluster`: the background reaches
-    across the view, an object does not), or none. With ``ego_motion`` ``(R, t)`` given,
-    it is the largest cluster that moves with it (within ``min_motion`` beyond its
-    scatter), whatever its share or spread, or none. ``geometry``: the clusters' a-points'
-    :class:`~mmreg._moments.Moments`, every row weighted 1, for the spread (the models'
-    moments weigh far rows less when the noise grows with range); None: the models'.
+    across the view, an object does not), or none; a cluster that spans the scene also
+    wins over a majority that does not (an object filling half of a camera's view).
+    With ``ego_motion`` ``(R, t)`` given, it is the largest cluster that moves with it
+    (within ``min_motion`` beyond its scatter), whatever its share or spread, or none.
+    ``geometry``: the clusters' a-points' :class:`~mmreg._moments.Moments`, every row
+    weighted 1, for the spread (the models' moments weigh far rows less when the noise
+    grows with range); None: the models'.
 
     Clusters that share its motion merge into it. Those that
     only move less than ``min_motion`` (a parked car whose flow carries a centimetre of
@@ -908,13 +910,16 @@ def merge_static_world(
         majority = share is not None and (
             sizes[static] + sizes[joined].sum() + sizes[slow].sum() >= share * sizes.sum()
         )
-        if not majority:
-            # No majority: the cluster that spans the scene, if one does.
-            static = widest_cluster(
-                models.moments if geometry is None else geometry, np.flatnonzero(sizes > 0)
-            )
-            if static < 0:
+        # The cluster that spans the scene, if one does: the static world without a
+        # majority, and instead of a majority that does not span it (an object filling
+        # half of a camera's view in front of the background).
+        spans = widest_cluster(
+            models.moments if geometry is None else geometry, np.flatnonzero(sizes > 0)
+        )
+        if not majority or (spans >= 0 and spans not in {static, *joined, *slow}):
+            if spans < 0:
                 return none
+            static = spans
             joined, slow = gathered(static)
     if not len(joined):
         return static, root, models, 0, slow
