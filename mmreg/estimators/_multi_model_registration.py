@@ -106,12 +106,14 @@ class MultiModelRegistration(BaseRegistration):
     correspondences are labelled -1 by a uniform outlier component and kept out of the
     motion fits; every cluster keeps a robust noise scale of its own (a network errs by
     millimetres on the static world and by centimetres on a moving car); the dominant
-    motion, when it holds half of the scene, is one static world however far apart its
-    pieces lie, flagged in ``static_cluster_``; adjacent clusters whose motions agree are
-    merged, touching moving pieces that move alike are one object, and correspondences
-    no cluster explains are searched for new motions, each accepted only if it pays for
-    itself. ``variant="robust"`` is the earlier default (one noise scale shared by all
-    clusters, no static world) and ``variant="paper"`` the paper's Algorithm 1, exactly.
+    motion, when it holds half of the scene (else the cluster that spans the scene, or
+    the clusters that move with a known ``ego_motion`` given to :meth:`fit`), is one
+    static world however far apart its pieces lie, flagged in ``static_cluster_``;
+    adjacent clusters whose motions agree are merged, touching moving pieces that move
+    alike are one object, and correspondences no cluster explains are searched for new
+    motions, each accepted only if it pays for itself. ``variant="robust"`` is the
+    earlier default (one noise scale shared by all clusters, no static world) and
+    ``variant="paper"`` the paper's Algorithm 1, exactly.
 
     Parameters
     ----------
@@ -143,8 +145,8 @@ class MultiModelRegistration(BaseRegistration):
     variant : {"sweep", "robust", "paper"}, default="sweep"
         ``"sweep"``: the robust loop (see Notes) for real LiDAR sweeps and scene-flow
         networks, the default: every cluster keeps a robust noise scale of its own while
-        there is a static world to measure its motion against (one shared scale when no
-        motion holds ``static_share`` of the scene, as on Table I's objects), the dominant
+        there is a static world to measure its motion against (one shared scale when there
+        is none, as on Table I's objects), the dominant
         motion is one static world however far apart its pieces lie (``static_share``,
         ``min_motion``), touching moving pieces whose motions agree within
         ``motion_tolerance`` of their motion are one object, proposals search the noise

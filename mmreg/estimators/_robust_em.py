@@ -7,9 +7,10 @@ correspondence to its most likely cluster within the gate); the named steps of
 1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member, each
    cluster with a robust noise scale of its own;
 2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`);
-3. the static world (:func:`merge_static_world`): the dominant motion gathers every
-   piece that moves with it, however far apart, into one cluster that the gate of eq. (7)
-   admits everywhere;
+3. the static world (:func:`merge_static_world`): the dominant motion (or, without a
+   majority, the cluster that spans the scene; or the clusters that move with a given
+   ego motion) gathers every piece that moves with it, however far apart, into one
+   cluster that the gate of eq. (7) admits everywhere;
 4. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
    in the sweep variant, clusters whose members lie scattered among other clusters'
    points (:func:`scattered_clusters`): neither has a body of its own (the static
@@ -112,7 +113,7 @@ class RobustEMResult(EMResult):
     noise_growth: float = 0.0
     """``c`` of the noise scale ``sigma_j (1 + c ||a||^2)``; 0 for equal noise."""
     static_cluster: int = -1
-    """The static world's cluster, -1 if no motion holds the majority."""
+    """The static world's cluster, -1 if there is none (:func:`merge_static_world`)."""
     moving: np.ndarray = None
     """Per cluster: does it move relative to the static world?"""
     pieces: "Pieces" = None
@@ -232,7 +233,8 @@ def robust_multi_model_em(
         when the noise does not grow with range); ``"constant"``: ``sigma_j``.
     static_share : float or None, default=0.5
         The dominant motion is the static world when it holds at least this share of the
-        clustered correspondences (:func:`merge_static_world`); None: no static world.
+        clustered correspondences; below it, the cluster that spans the scene
+        (:func:`merge_static_world`); None: no static world (unless ``ego_motion``).
     min_motion : float, default=0.05
         A cluster moving less than this (RMS, in the units of the points) relative to the
         static world is part of it.
