@@ -93,7 +93,8 @@ def widest_cluster(moments, candidates=None):
     >>> labels = np.repeat([0, 1], [50, 150])
     >>> widest_cluster(group_moments(a, a, labels, 2))
     0
-    >>> widest_cluster(group_moments(box, box, np.repeat([0, 1], 75), 2))
+    >>> two_boxes = np.vstack([box, box + [10.0, 0.0, 0.0]])  # objects alone
+    >>> widest_cluster(group_moments(two_boxes, two_boxes, np.repeat([0, 1], 150), 2))
     -1
     """
     # Each cluster's spread is its weighted mean (the rows' weights are inverse noise
