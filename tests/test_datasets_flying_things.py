@@ -237,3 +237,26 @@ def test_bundled_meshes_are_shapes(monkeypatch):
         make_flying_things(
             n_objects=1, n_points=10, image_size=(27, 48), shapes="bunny", **CLEAN, random_state=0
         )
+
+
+def test_still_objects_of_the_background_move_with_the_backdrop():
+    scene = make_flying_things(n_objects=4, n_static=3, **SMALL, **CLEAN, random_state=3)
+    background = scene.labels == 0
+    # Backdrop and still objects: one motion group, one instance each, numbered after the
+    # moving objects.
+    pieces = np.unique(scene.instance_labels[background])
+    assert pieces[0] == 0 and set(pieces[1:]) <= {5, 6, 7} and len(pieces) >= 2
+    np.testing.assert_array_equal(scene.instance_labels[~background], scene.labels[~background])
+    R, t = scene.rotations[0], scene.translations[0]
+    np.testing.assert_allclose(scene.a[background] @ R.T + t, scene.b[background], atol=1e-9)
+    assert scene.rotations.shape == (5, 3, 3)
+
+
+def test_still_objects_leave_the_moving_ones_as_they_were():
+    # The still objects are drawn after everything else: the moving objects' motions
+    # (and the camera's) are those of the scene without them.
+    plain = make_flying_things(n_objects=3, **SMALL, **CLEAN, random_state=5)
+    with_still = make_flying_things(n_objects=3, n_static=2, **SMALL, **CLEAN, random_state=5)
+    np.testing.assert_array_equal(with_still.rotations, plain.rotations)
+    np.testing.assert_array_equal(with_still.translations, plain.translations)
+    assert len(np.unique(with_still.instance_labels)) > len(np.unique(plain.instance_labels))

@@ -54,6 +54,10 @@ _EGO_SHIFT = (0.0, 0.5)
 # Backdrop: a plane this deep (m), tilted by up to this much (degrees).
 _BACKDROP_DEPTH = (45.0, 60.0)
 _BACKDROP_TILT = 20.0
+# Static objects of the background (FlyingThings3D's background holds still objects too):
+# diameter and depth of the centre (m).
+_STATIC_DIAMETER = (4.0, 8.0)
+_STATIC_DEPTH = (20.0, 40.0)
 # Attempts at placing an object clear of the others before giving up on clearance.
 _PLACEMENT_ATTEMPTS = 100
 
@@ -141,24 +145,29 @@ def _normalise(mesh):
     return vertices / (2 * radius), triangles
 
 
-def _place_objects(diameters, camera, rng):
-    """Object centres in the view at depths in ``_DEPTH``, clear of one another if possible.
+def _place_objects(diameters, camera, rng, depth=_DEPTH, placed=None):
+    """Object centres in the view at depths in ``depth``, clear of one another (and of the
+    ``placed`` ones, ``(centers, diameters)``) if possible.
 
     Each centre projects to a pixel uniform in the central 80 % of the image; objects are
     redrawn (up to ``_PLACEMENT_ATTEMPTS`` times) until their bounding balls are disjoint.
     """
-    centers = np.empty((len(diameters), 3))
-    for k, diameter in enumerate(diameters):  # a handful of objects
+    first = 0 if placed is None else len(placed[0])
+    centers = np.empty((first + len(diameters), 3))
+    sizes = np.concatenate([[] if placed is None else placed[1], diameters])
+    if first:
+        centers[:first] = placed[0]
+    for k in range(first, len(centers)):  # a handful of objects
         for _ in range(_PLACEMENT_ATTEMPTS):
             u = rng.uniform(0.1, 0.9) * camera.width
             v = rng.uniform(0.1, 0.9) * camera.height
-            z = rng.uniform(*_DEPTH)
+            z = rng.uniform(*depth)
             center = np.array([(u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z])
-            gap = np.linalg.norm(centers[:k] - center, axis=1) - (diameters[:k] + diameter) / 2
+            gap = np.linalg.norm(centers[:k] - center, axis=1) - (sizes[:k] + sizes[k]) / 2
             if np.all(gap > 0):
                 break
         centers[k] = center
-    return centers
+    return centers[first:]
 
 
 def make_flying_things(
@@ -169,6 +178,7 @@ def make_flying_things(
     shapes=PRIMITIVES,
     corruption=None,
     sam_masks=True,
+    n_static=0,
     random_state=None,
 ):
     """A FlyingThings3D-like scene: rendered objects flying in front of a camera.
@@ -216,6 +226,11 @@ def make_flying_things(
     sam_masks : bool, default=True
         Whether to simulate SegmentAnything masks of the first image
         (:func:`~mmreg.datasets._sam.simulate_sam_masks`, the backdrop as background).
+    n_static : int, default=0
+        Still objects of the background (FlyingThings3D's background holds some): random
+        shapes of 4-8 m at depths of 20-40 m that move with the backdrop (label 0), so
+        that the static world lies in pieces at several depths. Drawn after everything
+        else: a scene with ``n_static=0`` is the one drawn before this option existed.
     random_state : int, RandomState instance or None, default=None
         Seeds every random choice (shapes, poses, motions, pixels, corruption, masks).
 
@@ -228,7 +243,8 @@ def make_flying_things(
           metres, in each frame's camera coordinates (x right, y down, z forward).
         - ``labels`` (n,): motion group, 0 for the backdrop, ``1..K`` for the objects.
         - ``instance_labels`` (n,): the ground-truth instance (here the same as
-          ``labels``: one per object, the backdrop its own).
+          ``labels``: one per object, the backdrop its own; with ``n_static``, each
+          still object its own, numbered after the moving ones).
         - ``surface_labels`` (n,): the rendered mesh (here the same again).
         - ``outlier_mask`` (n,): gross errors of the corruption; ``bled_mask`` (n,):
           flows bled across an object boundary.
@@ -317,10 +333,27 @@ def make_flying_things(
     translations = np.stack([m[1] for m in motions])
 
     ids = np.arange(n_objects + 1)
+    labels = ids
+    n_static = check_count(n_static, "n_static")
+    if n_static:
+        # Still objects of the background: label 0, an instance each.
+        static_diameters = rng.uniform(*_STATIC_DIAMETER, n_static)
+        static_centers = _place_objects(
+            static_diameters, camera, rng, _STATIC_DEPTH, placed=(centers, diameters)
+        )
+        for k in range(n_static):
+            shape = shapes[rng.randint(len(shapes))]
+            unit = _normalise(bundled[shape]) if shape in bundled else _primitive(shape, rng)
+            rotation = Rotation.random(random_state=rng).as_matrix()
+            meshes.append(
+                transform_mesh(unit, rotation, static_centers[k], scale=static_diameters[k])
+            )
+        labels = np.concatenate([ids, np.zeros(n_static, dtype=ids.dtype)])
+        ids = np.arange(n_objects + 1 + n_static)
     return observe(
         [backdrop, *meshes],
         (rotations, translations),
-        ids,
+        labels,
         ids,
         camera,
         n_points,

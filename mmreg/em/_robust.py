@@ -10,8 +10,9 @@ correspondence to its most likely cluster within the gate); the named steps of
 2. merging of adjacent clusters that share a motion (:func:`merge_adjacent`,
    ``"merging"``);
 3. the static world (:func:`merge_static_world`, ``"static_world"``): the dominant
-   motion gathers every piece that moves with it, however far apart, into one cluster
-   that the gate of eq. (7) admits everywhere;
+   motion (or, without a majority, the cluster that spans the scene; or the clusters
+   that move with a given ego motion) gathers every piece that moves with it, however
+   far apart, into one cluster that the gate of eq. (7) admits everywhere;
 4. in the sweep variant, touching moving pieces whose motions agree joined into one
    object (:func:`join_moving_pieces`, ``"moving_pieces"``);
 5. dissolving layers of flow that bled along a boundary (:func:`boundary_layers`) and,
@@ -50,11 +51,13 @@ from scipy.stats import chi2
 from sklearn.utils import check_random_state
 
 from mmreg._array.geometry import row_medians
+from mmreg._array.moments import group_moments
 from mmreg._array.neighbors import NeighbourTable, lookup_tree
 from mmreg._array.relabelling import rows_moved
 from mmreg.em._gate import ClusterGate
 from mmreg.em._likelihood import morton_order, single_threaded_blas
 from mmreg.em._paper import EMResult, _compact_initial, _size_rank, default_sigma_floor
+from mmreg.em._static_world import StaticWorldRule, static_world_rule
 from mmreg.em._steps import (
     _with,
     adjacent_pairs,
@@ -124,7 +127,7 @@ class RobustEMResult(EMResult):
     noise_growth: float = 0.0
     """``c`` of the noise scale ``sigma_j (1 + c ||a||^2)``; 0 for equal noise."""
     static_cluster: int = -1
-    """The static world's cluster, -1 if no motion holds the majority."""
+    """The static world's cluster, -1 if there is none (:func:`merge_static_world`)."""
     moving: np.ndarray = None
     """Per cluster: does it move relative to the static world?"""
     pieces: "Pieces" = None
@@ -216,6 +219,7 @@ def robust_multi_model_em(
     tol=1e-3,
     skip_steps=(),
     sweep=False,
+    ego_motion=None,
     neighbours=None,
     random_state=None,
     verbose=0,
@@ -243,7 +247,8 @@ def robust_multi_model_em(
         when the noise does not grow with range); ``"constant"``: ``sigma_j``.
     static_share : float or None, default=0.5
         The dominant motion is the static world when it holds at least this share of the
-        clustered correspondences (:func:`merge_static_world`); None: no static world.
+        clustered correspondences; below it, the cluster that spans the scene
+        (:func:`merge_static_world`); None: no static world (unless ``ego_motion``).
     min_motion : float, default=0.05
         A cluster moving less than this (RMS, in the units of the points) relative to the
         static world is part of it.
@@ -265,6 +270,10 @@ def robust_multi_model_em(
         proposals that search the noise scale and also try local translations, slow
         movers sought in the static world's tail, and the outlier weight capped at one
         half. False: one shared noise scale and none of these (the robust default).
+    ego_motion : tuple of (ndarray, ndarray) or None, default=None
+        Sweep variant: the static world's motion ``(R, t)`` (``b = R a + t``), when the
+        caller knows it; the static world is then the clusters that move with it
+        (:func:`merge_static_world`), whatever their share.
     neighbours : NeighbourTable or None, default=None
         The a-points' 16 nearest neighbours, if the caller has listed them; None lists
         them here (when the boundary layers step runs, the only one that reads them).
@@ -294,6 +303,7 @@ def robust_multi_model_em(
         tol=tol,
         skip_steps=skip_steps,
         sweep=sweep,
+        ego_motion=ego_motion,
         neighbours=neighbours,
         random_state=random_state,
         verbose=verbose,
@@ -416,6 +426,7 @@ def _setting(
     tol,
     skip_steps,
     sweep,
+    ego_motion,
     neighbours,
     random_state,
     verbose,
@@ -431,7 +442,9 @@ def _setting(
     rng = check_random_state(random_state)
     if sigma_floor is None:
         sigma_floor = default_sigma_floor(b)
-    share = static_share if sweep and run["static_world"] else None
+    share = (
+        static_world_rule(static_share, ego_motion, a) if sweep and run["static_world"] else None
+    )
     join_pieces = joins_moving_pieces(sweep, skip_steps, motion_tolerance)
     if not reads_neighbours(skip_steps):
         neighbours = None
@@ -588,6 +601,7 @@ def _static_world(setting, state):
             setting.sigma_floor,
             setting.share,
             setting.min_motion,
+            state.labels,
         )
     )
     state.members = _through(state.root, state.labels)
@@ -1269,8 +1283,12 @@ def _readmit_outliers(
     return labels
 
 
-def _gather_static_world(models, root, d, sigma_floor, share, min_motion):
+def _gather_static_world(models, root, d, sigma_floor, share, min_motion, labels=None):
     """:func:`merge_static_world` on the clusters left by ``root``; composes the roots.
+
+    ``share``: the static world's rule (:class:`StaticWorldRule`, or the majority share
+    alone), None for no static world; ``labels``: each correspondence's cluster before
+    ``root``, for the clusters' spread on the rule's points.
 
     Returns the static world's cluster (-1 if none), the models, the composed roots, the
     number of merges and the slow clusters (see :func:`merge_static_world`).
@@ -1278,9 +1296,21 @@ def _gather_static_world(models, root, d, sigma_floor, share, min_motion):
     none = (-1, models, root, 0, np.empty(0, dtype=np.intp))
     if share is None:
         return none
+    rule = share if isinstance(share, StaticWorldRule) else StaticWorldRule(share)
     survivors = np.flatnonzero(root == np.arange(len(root)))
+    geometry = None
+    if rule.points is not None and labels is not None:
+        rows = np.flatnonzero(labels >= 0)
+        points = rule.points[rows]
+        geometry = group_moments(points, points, root[labels[rows]], len(root)).take(survivors)
     static, sub_root, sub_models, n_merges, slow = merge_static_world(
-        models.take(survivors), d, sigma_floor, share=share, min_motion=min_motion
+        models.take(survivors),
+        d,
+        sigma_floor,
+        share=rule.share,
+        min_motion=min_motion,
+        ego_motion=rule.ego_motion,
+        geometry=geometry,
     )
     if static < 0:
         return none

@@ -30,6 +30,7 @@ from mmreg._array.moments import Moments, group_moments
 from mmreg._array.neighbors import NeighbourTable, touching_groups
 from mmreg.em._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg.em._likelihood import morton_order
+from mmreg.em._static_world import agrees_with_ego_motion, widest_cluster
 
 __all__ = [
     "ClusterModels",
@@ -838,7 +839,9 @@ def _with(models, other):
     )
 
 
-def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
+def merge_static_world(
+    models, d, sigma_floor, *, share=0.5, min_motion=0.0, ego_motion=None, geometry=None
+):
     """Find the static world and gather its pieces, however far apart.
 
     The static world is the dominant motion (the ego motion of the sensor, for a scene
@@ -846,17 +849,28 @@ def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
     motion (the likelihood-ratio test of :func:`merge_adjacent`, without the distance
     gate) or moves less than ``min_motion`` relative to it beyond its own scatter
     (:func:`motion_beyond_scatter`), if together they hold at least ``share`` of the
-    clustered correspondences. Clusters that share its motion merge into it. Those that
+    clustered correspondences. In a crowded scene no motion does: the static world is
+    then the cluster that spans the scene, whatever its share
+    (:func:`~mmreg.em._static_world.widest_cluster`: the background reaches
+    across the view, an object does not), or none; a cluster that spans the scene also
+    wins over a majority that does not (an object filling half of a camera's view).
+    With ``ego_motion`` ``(R, t)`` given, it is the largest cluster that moves with it
+    (within ``min_motion`` beyond its scatter), whatever its share or spread, or none.
+    ``geometry``: the clusters' a-points' :class:`~mmreg._array.moments.Moments`, every row
+    weighted 1, for the spread (the models' moments weigh far rows less when the noise
+    grows with range); None: the models'.
+
+    Clusters that share its motion merge into it. Those that
     only move less than ``min_motion`` (a parked car whose flow carries a centimetre of
     annotation jitter) are *slow*: they keep their own motion, so that their
     correspondences are not outliers of the static world's, and are reported as part of
-    it. Anything that moves alike but is not the majority keeps the gate of eq. (7): two
-    far-apart objects with one motion stay two objects (the paper's Exp. 3).
+    it. Anything that moves alike but is not the static world keeps the gate of eq. (7):
+    two far-apart objects with one motion stay two objects (the paper's Exp. 3).
 
     Returns
     -------
     static : int
-        The static world's cluster, or -1 if no motion holds ``share`` of the scene.
+        The static world's cluster, or -1 if there is none.
     root : ndarray of shape (K,)
         The cluster each cluster was merged into (itself if none).
     models : ClusterModels
@@ -871,16 +885,42 @@ def merge_static_world(models, d, sigma_floor, *, share=0.5, min_motion=0.0):
     sizes = models.moments.size
     if k == 0 or sizes.sum() == 0:
         return none
-    static = int(np.argmax(sizes))
-    others = np.flatnonzero((np.arange(k) != static) & (sizes > 0))
-    agree = slow = np.zeros(len(others), dtype=bool)
-    if len(others):
-        pairs = np.column_stack([np.full(len(others), static), others])
-        agree = _merge_ratio(models, pairs, d) < 1.0
-        slow = ~agree & (motion_beyond_scatter(models, static, others) < min_motion)
-    joined, slow = others[agree], others[slow]
-    if sizes[static] + sizes[joined].sum() + sizes[slow].sum() < share * sizes.sum():
-        return none
+
+    def gathered(static):
+        others = np.flatnonzero((np.arange(k) != static) & (sizes > 0))
+        agree = slow = np.zeros(len(others), dtype=bool)
+        if len(others):
+            pairs = np.column_stack([np.full(len(others), static), others])
+            agree = _merge_ratio(models, pairs, d) < 1.0
+            slow = ~agree & (motion_beyond_scatter(models, static, others) < min_motion)
+        return others[agree], others[slow]
+
+    if ego_motion is not None:
+        present = np.flatnonzero(sizes > 0)
+        gap = _motion_from(models.take(present), ego_motion)
+        gap -= _rms(models.squared_error[present], models.moments.take(present))
+        moving_with = present[agrees_with_ego_motion(gap, min_motion)]
+        if not len(moving_with):
+            return none
+        static = int(moving_with[np.argmax(sizes[moving_with])])
+        joined, slow = gathered(static)
+    else:
+        static = int(np.argmax(sizes))
+        joined, slow = gathered(static)
+        majority = share is not None and (
+            sizes[static] + sizes[joined].sum() + sizes[slow].sum() >= share * sizes.sum()
+        )
+        # The cluster that spans the scene, if one does: the static world without a
+        # majority, and instead of a majority that does not span it (an object filling
+        # half of a camera's view in front of the background).
+        spans = widest_cluster(
+            models.moments if geometry is None else geometry, np.flatnonzero(sizes > 0)
+        )
+        if not majority or (spans >= 0 and spans not in {static, *joined, *slow}):
+            if spans < 0:
+                return none
+            static = spans
+            joined, slow = gathered(static)
     if not len(joined):
         return static, root, models, 0, slow
     models = models.take(np.arange(k))  # a copy: the static world's entry is overwritten
