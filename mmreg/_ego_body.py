@@ -10,8 +10,8 @@ vehicle does; they are found from the data, in two steps:
    point of the other sweep, in the same sensor coordinates, is within the matching
    distance;
 2. confirmation (:func:`confirm_body`): the ego motion, found without the candidates,
-   moves them by more than the matching distance and leaves them off the second
-   sweep, so the identity, not the ego motion, explains them. When the sensor stands
+   carries a clear share of each island of them off the second sweep, so the identity,
+   not the ego motion, explains them. When the sensor stands
    still nothing is confirmed (the body then looks like the static world, and is).
 
 Every length is the caller's, in the points' units (``SweepRegistration`` gives them in
@@ -21,7 +21,15 @@ units of its ``tau``).
 import numpy as np
 from scipy.spatial import cKDTree
 
+from mmreg._islands import voxel_islands
+
 __all__ = ["confirm_body", "fixed_candidates"]
+
+# An island of candidates is the body when this share of its points is carried off by
+# the ego motion (a third of a car's returns face along the motion: its ends and edges).
+_CARRIED_SHARE = 0.25
+# ... and when this share of its points are candidates at all.
+_FIXED_SHARE = 0.5
 
 
 def fixed_candidates(points, sweep, *, reach, match, exclude=None, sweep_exclude=None):
@@ -75,15 +83,18 @@ def fixed_candidates(points, sweep, *, reach, match, exclude=None, sweep_exclude
     return candidates, sweep_candidates
 
 
-def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match):
+def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match, cell, near):
     """The candidates that move with the sensor: the ego motion does not explain them.
 
-    A candidate is confirmed when the ego motion ``(R, t)`` moves it by more than three
-    times ``match`` and puts it farther than ``match`` from every point of ``sweep``
-    that is not a candidate (a wall beside the car also matches itself in the sensor's
-    frame, as it slides along itself, but the ego motion keeps it on the wall). A point
-    of ``sweep`` is confirmed when it is a candidate within ``match`` of a confirmed
-    point of ``points``, same coordinates.
+    A candidate is carried off when the ego motion ``(R, t)`` moves it by more than three
+    times ``match`` and puts it farther than ``match`` from every point of ``sweep``. A
+    surface that slides along itself (a roof, a wall beside the car) is explained by
+    both motions, so the points ``near`` the sensor are cut into islands (touching
+    voxels of side ``cell``) and an island is the body when at least half of its points
+    are candidates (the body's returns come back to the same place; a static surface
+    sampled anew matches by chance only here and there) and at least a quarter of
+    those are carried off (its faces across the motion are). A point of ``sweep`` is the body
+    when it is a candidate within ``match`` of the body's points, same coordinates.
 
     Returns
     -------
@@ -92,31 +103,42 @@ def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match):
 
     Examples
     --------
-    A point fixed in the sensor's frame while the sensor drives 1 m on:
+    A short wall across the motion, fixed in the sensor's frame while the sensor drives
+    1 m on, and a long wall along the motion, static:
 
     >>> import numpy as np
     >>> from mmreg._ego_body import confirm_body
-    >>> points = np.array([[1.0, 0.0, 0.0], [5.0, 5.0, 0.0]])
-    >>> sweep = np.array([[1.0, 0.0, 0.0], [4.0, 5.0, 0.0]])
+    >>> across = np.c_[np.full(20, 1.0), np.linspace(-0.5, 0.5, 20), np.zeros(20)]
+    >>> along = np.c_[np.linspace(-2, 2, 80), np.full(80, 2.0), np.zeros(80)]
+    >>> points = np.vstack([across, along])
+    >>> sweep = np.vstack([across, along + [0.025, 0, 0]])
+    >>> candidates = np.ones(100, dtype=bool)
     >>> ego = (np.eye(3), np.array([-1.0, 0.0, 0.0]))
-    >>> body, sweep_body = confirm_body(points, sweep, np.array([True, False]),
-    ...                                 np.array([True, False]), ego, match=0.1)
-    >>> body.tolist(), sweep_body.tolist()
-    ([True, False], [True, False])
+    >>> body, sweep_body = confirm_body(points, sweep, candidates, candidates, ego,
+    ...                                 match=0.1, cell=0.2, near=candidates)
+    >>> int(body[:20].sum()), int(body[20:].sum()), int(sweep_body.sum())
+    (20, 0, 20)
     """
     body = np.zeros(len(points), dtype=bool)
     sweep_body = np.zeros(len(sweep), dtype=bool)
     first = np.flatnonzero(candidates)
-    rest = sweep[~sweep_candidates]
     if not len(first) or not sweep_candidates.any():
         return body, sweep_body
     rotation, translation = ego
     moved = points[first] @ rotation.T + translation
     carried = np.linalg.norm(moved - points[first], axis=1) > 3 * match
-    if len(rest):
-        distance, _ = cKDTree(rest).query(moved, distance_upper_bound=match)
-        carried &= distance > match
-    body[first[carried]] = True
+    distance, _ = cKDTree(sweep).query(moved, distance_upper_bound=match)
+    carried &= distance > match
+    around = np.flatnonzero(near | candidates)
+    islands, n_islands = voxel_islands(points[around], cell, 1)
+    fixed = candidates[around]
+    moved_off = np.zeros(len(points), dtype=bool)
+    moved_off[first] = carried
+    sizes = np.maximum(np.bincount(islands, minlength=n_islands), 1)
+    n_fixed = np.bincount(islands, weights=fixed, minlength=n_islands)
+    n_carried = np.bincount(islands, weights=moved_off[around], minlength=n_islands)
+    chosen = (n_fixed >= _FIXED_SHARE * sizes) & (n_carried >= _CARRIED_SHARE * n_fixed)
+    body[around] = chosen[islands] & fixed
     if body.any():
         second = np.flatnonzero(sweep_candidates)
         distance, _ = cKDTree(points[body]).query(sweep[second], distance_upper_bound=match)

@@ -730,7 +730,17 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             rest, sweep_rest, scale=tau, max_displacement=reach, init=known
         )
         ego = (rotation, translation)
-        body, sweep_body = confirm_body(a, sweep, candidates, sweep_candidates, ego, match=match)
+        body, sweep_body = confirm_body(
+            a,
+            sweep,
+            candidates,
+            sweep_candidates,
+            ego,
+            match=match,
+            cell=self.island_radius_,
+            near=(np.linalg.norm(a, axis=1) < _BODY_REACH * tau)
+            & (True if masks is None else ~masks[0]),
+        )
         if body.sum() < _MIN_BODY_POINTS:
             return None
         return body, sweep_body, ego
