@@ -123,3 +123,17 @@ def test_a_standing_sensor_keeps_its_body_in_the_static_world():
     a = np.vstack([scene.a, body])
     est = SweepRegistration(random_state=0).fit(a, sweep=a + rng.normal(0, 0.005, a.shape))
     assert est.n_ego_body_ == 0
+
+
+def test_without_small_gicp_our_icp_finds_a_short_step(monkeypatch):
+    """Intel macOS has no small_gicp wheel: the ego step falls back on our ICP alone."""
+    import mmreg.estimators._two_sweeps as two_sweeps
+
+    monkeypatch.setattr(two_sweeps, "_has_small_gicp", lambda: False)
+    scene = make_lidar_sweeps(n_moving=1, n_beams=16, n_azimuths=512, random_state=0)
+    truth = scene.transforms[0]
+    est = SweepRegistration(random_state=0).fit(scene.a, sweep=scene.sweep)
+    rotation, translation = est.ego_motion_
+    assert est.n_ego_body_ == 0
+    assert np.linalg.norm(translation - truth[:3, 3]) < 0.1
+    assert _angle_deg(rotation, truth[:3, :3]) < 0.2

@@ -13,6 +13,7 @@ moving objects. Given the points' capture times,
 the moving clusters are deskewed in the ICP (:mod:`mmreg._deskew`).
 """
 
+import importlib.util
 from numbers import Integral, Real
 
 import numpy as np
@@ -73,6 +74,11 @@ _MIN_BODY_POINTS = 10
 # Refinement mode with capture times: rounds of deskewing (with the last round's motions)
 # and ICP.
 _DESKEW_ROUNDS = 2
+
+
+def _has_small_gicp():
+    """Whether small_gicp (the ego motion's GICP) is installed."""
+    return importlib.util.find_spec("small_gicp") is not None
 
 
 def _group_sums_3(values, groups, n_groups):
@@ -345,7 +351,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Raw mode: points of the first sweep taken for returns from the ego vehicle's own
         body (near the sensor and fixed in its frame while the ego motion carries the
         world away; :mod:`mmreg._ego_body`): left out of the fit, labelled -1, with a
-        zero flow (they stay where they were in the sensor's frame).
+        zero flow (they stay where they were in the sensor's frame). Always 0 without
+        small_gicp, whose ego motion tells them apart.
     ego_body_mask_ : ndarray of shape (n_samples,), bool
         Which points those are.
     ground_mask_ : ndarray of shape (n_samples,) or None
@@ -711,6 +718,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         confirms those it carries off the second sweep. Returns ``(body, sweep_body,
         ego)``, the ego motion to start the registration of the rest from.
         """
+        if not _has_small_gicp():  # the body is told apart by GICP's ego motion
+            return None
         tau = self._length_scale()
         match = _BODY_MATCH * tau
         exclude = (None, None) if masks is None else masks
@@ -948,9 +957,34 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         scenes), never on real or ray-cast sweeps (0.89-1.02 of it;
         ``benchmarks/results/ego_motion.md``).
 
+        Without small_gicp (Intel macOS has no wheel), our ICP alone, from the identity
+        (or ``known``) with a reach of twice then once ``max_distance_``.
+
         Returns the motion and its robust point-to-plane residual scale.
         """
         sweep, tree, normals, rng, _ = context
+        labels = np.zeros(len(a), dtype=np.intp)
+        keep = subsample_groups(labels, self.max_points, rng)
+        mask = np.full(len(a), -1, dtype=np.intp)
+        mask[keep] = 0
+        if not _has_small_gicp():
+            rotation, translation = (np.eye(3), np.zeros(3)) if known is None else known
+            rotation, translation = rotation[None], translation[None]
+            for reach in (2.0, 1.0):
+                result = multi_body_icp(
+                    a,
+                    mask,
+                    rotation,
+                    translation,
+                    sweep,
+                    tree=tree,
+                    normals=normals,
+                    max_distance=reach * self.max_distance_,
+                    max_iter=self.max_icp_iter,
+                    tol=_TOL * self.max_distance_,
+                )
+                rotation, translation = result.rotations, result.translations
+            return (rotation[0], translation[0]), float(result.scales[0])
         tau = self._length_scale()
         reach = max(tau, self.max_displacement_)
         if known is not None:  # a start within the fine stage's reach: no coarse stage
@@ -964,10 +998,6 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             init=known,
         )
         gicp = (rotation, translation)
-        labels = np.zeros(len(a), dtype=np.intp)
-        keep = subsample_groups(labels, self.max_points, rng)
-        mask = np.full(len(a), -1, dtype=np.intp)
-        mask[keep] = 0
         result = multi_body_icp(
             a,
             mask,
