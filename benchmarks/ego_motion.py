@@ -6,7 +6,7 @@ Rows are sweep pairs: the real Argoverse 2 pairs of ../shared/realdata with thei
 sweep (``av2_api_7fab2350`` with ground in and ground removed, ``icpflow_av2_demo`` whose
 true ego motion is the identity), ``av2_api_7fab2350`` whose second sweep is seen from a
 sensor 4.5 m and 3 degrees further on (a 2 Hz-like gap on real structure), and generated
-street sweeps ray cast 0.1 s and 0.5 s apart (10 m/s, 8 degrees/s; ``_lidar_street.py``,
+street sweeps ray cast 0.05 s, 0.1 s and 0.5 s apart (10 m/s, 8 degrees/s; ``_lidar_street.py``,
 1 cm range noise). Columns: rotation error (deg), translation error (m), static EPE (m:
 the mean distance between where the estimate and the truth put the static points) and
 time (ms, median of ``--repeats`` runs, the methods interleaved), for
@@ -256,7 +256,7 @@ def real_pairs(root):
 
 
 def generated_pairs():
-    for dt in (0.1, 0.5):
+    for dt in (0.05, 0.1, 0.5):
         s = street_sweeps(dt=dt, speed=10.0, yaw_rate=8.0, noise=0.01, random_state=0)
         truth = _matrix(s.rotation, s.translation)
         ends = s.a[s.static] @ s.rotation.T + s.translation
