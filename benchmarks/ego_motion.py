@@ -74,6 +74,13 @@ moving 0.106, 5 of 6 found, no static cluster moving; icpflow_av2_demo static EP
 now called moving (0 before); streets 0.5 s apart (make_lidar_sweeps, seeds 0-1): ego
 0.006-0.010 deg / 0.2-0.5 mm from the identity (the old ICP was lost 3.5 m off on seed 0),
 every car found with the automatic max_displacement of 1.5 ego steps (7.5 m).
+- Why our ICP loses to GICP on the real pairs (our ICP started at GICP's motion, reach
+  1 m; rotation deg / static EPE mm on 7fab2350 in, removed, demo): 5,000 points and
+  Tukey 2 scales 0.064 / 18, 0.071 / 20, 0.048 / 34; all points 0.068 / 19, 0.065 / 18,
+  0.037 / 28; Tukey 4.685 scales 0.063 / 17, 0.059 / 17, 0.040 / 32; 8 scales 0.060 /
+  17, 0.048 / 14, 0.035 / 29 (all points and 8 scales 0.061 / 17, 0.057 / 16, 0.056 /
+  26). Neither the points nor the kernel close the gap to GICP (0.030 / 12, 0.038 / 13,
+  0.010 / 17): the raw sweep's point-to-plane normals on scan rings are what loses.
 
 ## Toward a robust ego motion for SweepRegistration (not wired yet)
 
