@@ -5,13 +5,15 @@ second sweep as its own points, the estimator's clusters are kept and each clust
 motion is refined by robust point-to-plane ICP on the second sweep (:mod:`mmreg.sweeps._icp`),
 so a scene-flow network's bias (a systematic error that a rigid fit keeps) is removed.
 Given the first sweep alone, putative correspondences are made first: the ego motion by
-ICP from the identity, then every spatial island of the first sweep is aligned to the
-second from the ego motion and from the peaks of a histogram of translations to nearby
-points of the second sweep (as ICP-Flow does), and the estimator groups the islands'
-motions into the static world and the moving objects. Given the points' capture times,
+GICP from the identity, coarse to fine (:mod:`mmreg.sweeps._ego_motion`), then every spatial
+island of the first sweep is aligned to the second from the ego motion and from the
+peaks of a histogram of translations to nearby points of the second sweep (as ICP-Flow
+does), and the estimator groups the islands' motions into the static world and the
+moving objects. Given the points' capture times,
 the moving clusters are deskewed in the ICP (:mod:`mmreg.sweeps._deskew`).
 """
 
+import importlib.util
 from numbers import Integral, Real
 
 import numpy as np
@@ -26,6 +28,10 @@ from mmreg._array.grouping import group_bounds
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._validation import check_coordinate_range, invalid_rows
 from mmreg.sweeps._deskew import deskew, relative_motions
+from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
+from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
+from mmreg.sweeps._ego_motion import _RESIDUAL_POINTS as _EGO_RESIDUAL_POINTS
+from mmreg.sweeps._ego_motion import _check_motion, _residual_scale, ego_motion
 from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
@@ -51,9 +57,28 @@ _LENGTHS_PER_TAU = {"max_distance": 0.2, "island_radius": 0.1, "max_displacement
 # the static world) by fewer than this many of the ego ICP's robust residual scales only
 # slides along them (see _join_slides).
 _SLIDE_SCALES = 3.0
+# Raw mode: the ego ICP's motion replaces GICP's when its robust residual scale is below
+# this share of GICP's (see SweepRegistration._ego_motion). Measured ratios: 0.89-1.02
+# on real and ray-cast sweeps (GICP the more accurate), 0.47-0.52 on sparse resampled
+# boxes of which 40 % move, 0.0005-0.002 on noiseless boxes and walker scenes.
+_EGO_EXACT_SHARE = 0.75
+# Raw mode: "auto" max_displacement is at least this many times the ego motion's step.
+_TRAFFIC_PER_EGO = 1.5
+# Raw mode, the ego vehicle's body (mmreg.sweeps._ego_body), in units of tau: candidates lie
+# within _BODY_REACH of the sensor (3 m at tau 5; nuScenes' body returns lie within
+# 2.5 m) and match the other sweep within _BODY_MATCH (5 cm) at the same coordinates;
+# fewer than _MIN_BODY_POINTS confirmed points are no body.
+_BODY_REACH = 0.6
+_BODY_MATCH = 0.01
+_MIN_BODY_POINTS = 10
 # Refinement mode with capture times: rounds of deskewing (with the last round's motions)
 # and ICP.
 _DESKEW_ROUNDS = 2
+
+
+def _has_small_gicp():
+    """Whether small_gicp (the ego motion's GICP) is installed."""
+    return importlib.util.find_spec("small_gicp") is not None
 
 
 def _group_sums_3(values, groups, n_groups):
@@ -210,11 +235,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       point-to-plane ICP (Tukey's biweight, the cluster's own residual scale), all
       clusters at once, starting from the cluster's motion.
     * **raw** -- ``X`` of shape ``(n, 3)``: the first sweep alone. The ego motion is found
-      by ICP from the identity. Both sweeps are cut into islands (voxels of side
-      ``island_radius`` that touch, :mod:`mmreg.sweeps._islands`); every island of the first is
-      aligned to ``sweep`` from the ego motion, from the offsets of its centroid to those
-      of nearby islands of the second, and from the peaks of a histogram of translations
-      towards the second sweep's points within ``max_displacement`` (as ICP-Flow does).
+      from the identity (or the ``ego_motion`` given to ``fit``) by GICP, coarse to fine
+      (:mod:`mmreg.sweeps._ego_motion`, any step up to ``max(tau, max_displacement)``), and
+      polished by ICP on the raw points where that clearly fits better. Both sweeps are
+      cut into islands (voxels of side ``island_radius`` that touch,
+      :mod:`mmreg.sweeps._islands`); every island of the first is aligned to ``sweep`` from
+      the ego motion, from the offsets of its centroid to those of nearby islands of the
+      second, and from the peaks of a histogram of translations towards the second
+      sweep's points within ``max_displacement`` (as ICP-Flow does).
       An island keeps the ego motion unless its best alternative wins by a clear margin
       (robust point-to-plane likelihood gain over a BIC price, a fifth more of its points
       explained, and mmreg's moving rule; :mod:`mmreg.sweeps._island_motions`). Small objects
@@ -253,7 +281,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Raw mode: smaller islands take the ego motion.
     max_displacement : float or "auto", default="auto"
         Raw mode: largest motion of an object relative to the static world, between the
-        sweeps. ``"auto"``: ``0.6 tau`` (3 m with ``tau=5``: 30 m/s at 10 Hz).
+        sweeps. ``"auto"``: ``0.6 tau`` (3 m with ``tau=5``: 30 m/s at 10 Hz), or 1.5
+        times the length of the ego motion's translation where that is more (other
+        traffic moves about as fast as the sensor: 7.5 m for 2 Hz keyframes at 36 km/h).
     max_rounds : int, default=2
         Raw mode: most rounds of estimator and ICP.
     raw_init : {"islands", "estimator"}, default="islands"
@@ -317,6 +347,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Rows of ``X`` and points of ``sweep`` that hold no measurement (NaN, or the
         origin where a LiDAR driver writes its failed returns, when more than one point
         lies there): left out of the fit; in ``X`` they are labelled -1 with a NaN flow.
+    n_ego_body_ : int
+        Raw mode: points of the first sweep taken for returns from the ego vehicle's own
+        body (near the sensor and fixed in its frame while the ego motion carries the
+        world away; :mod:`mmreg.sweeps._ego_body`): left out of the fit, labelled -1, with a
+        zero flow (they stay where they were in the sensor's frame). Always 0 without
+        small_gicp, whose ego motion tells them apart.
+    ego_body_mask_ : ndarray of shape (n_samples,), bool
+        Which points those are.
     ground_mask_ : ndarray of shape (n_samples,) or None
         Raw mode: which points of the first sweep were taken for the ground (all in the
         static world); None when the ground was kept.
@@ -462,6 +500,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         interval=None,
         ground=None,
         sweep_ground=None,
+        ego_motion=None,
     ):
         """Find the objects and their motions, refined on the second sweep.
 
@@ -489,6 +528,13 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             Raw mode: the known ground points of each sweep (e.g. from a map: Argoverse 2
             takes points within 0.3 m of its ground height raster). Given together, they
             replace the segmentation of ``ground="auto"``; see ``ground``.
+        ego_motion : tuple (rotation, translation) or None
+            Raw mode: a known ego motion (odometry, a previous pair's), ``(3, 3)`` and
+            ``(3,)``, taking the first sweep's points into the second sweep's frame. The
+            ego step starts from it instead of searching from the identity, and refines
+            it on the sweeps (so it should be within ``tau / 5`` of the truth). None: the
+            ego motion is found from the identity, up to ``max(tau, max_displacement)``
+            away (5 m with ``tau=5``: 2 Hz keyframes at 36 km/h).
 
         Returns
         -------
@@ -525,7 +571,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                         f"{_MIN_SWEEP_POINTS} are needed."
                     )
         if not self.n_invalid_ and not self.n_sweep_invalid_:
-            return self._fit(X, sweep, times, sweep_times, interval, ground, sweep_ground)
+            return self._fit(
+                X, sweep, times, sweep_times, interval, ground, sweep_ground, ego_motion
+            )
         # Invalid returns (NaN padding, a driver's failed returns at the origin) are no
         # measurement: the fit leaves them out and they come back as outliers.
         if invalid.all():
@@ -553,12 +601,16 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             interval,
             rows(ground, keep, "ground"),
             rows(sweep_ground, keep_sweep, "sweep_ground"),
+            ego_motion,
         )
         labels = np.full(len(X), -1, dtype=self.labels_.dtype)
         labels[keep] = self.labels_
         flow = np.full((len(X), self.flow_.shape[1]), np.nan)
         flow[keep] = self.flow_
         self.labels_, self.flow_, self.outlier_mask_ = labels, flow, labels < 0
+        body = np.zeros(len(X), dtype=bool)
+        body[keep] = self.ego_body_mask_
+        self.ego_body_mask_ = body
         if self.ground_mask_ is not None:
             ground_mask = np.zeros(len(X), dtype=bool)
             ground_mask[keep] = self.ground_mask_
@@ -567,8 +619,21 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             self.ground_mask_, self.sweep_ground_mask_ = ground_mask, sweep_ground_mask
         return self
 
-    def _fit(self, X, sweep, times, sweep_times, interval, ground, sweep_ground):
+    def _fit(
+        self,
+        X,
+        sweep,
+        times,
+        sweep_times,
+        interval,
+        ground,
+        sweep_ground,
+        known=None,
+        find_body=True,
+    ):
         """``fit`` on valid rows: ``X`` validated, invalid returns of both sweeps left out."""
+        self.n_ego_body_ = 0
+        self.ego_body_mask_ = np.zeros(len(X), dtype=bool)
         check_coordinate_range(X)
         rng = check_random_state(self.random_state)
         self._resolve_lengths()
@@ -578,6 +643,13 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 "the second sweep too, fit(X, sweep=points2, times=..., sweep_times=..., "
                 "interval=...)."
             )
+        if known is not None and (sweep is None or X.shape[1] != 3):
+            raise ValueError(
+                "ego_motion goes with two raw sweeps: fit(points1, sweep=points2, "
+                "ego_motion=(R, t)); with correspondences their static world holds it."
+            )
+        if known is not None:
+            known = _check_motion(known)
         if sweep is None and (ground is not None or sweep_ground is not None):
             raise ValueError("ground and sweep_ground go with two raw sweeps: pass sweep too.")
         if sweep is None and X.shape[1] % 2 == 0:
@@ -615,8 +687,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             self.n_rounds_ = 1
         else:
             masks = self._ground_masks(a, sweep, ground, sweep_ground)
+            if find_body:
+                body = self._ego_body(a, sweep, masks, known)
+                if body is not None:
+                    return self._fit_without_body(
+                        X, sweep, (times, sweep_times, interval), masks, body
+                    )
             labels, estimator, rotations, translations, scales, sigmas, static = (
-                self._raw_with_ground(a, context, masks)
+                self._raw_with_ground(a, context, masks, known)
             )
         self.estimator_ = estimator
         self.icp_scales_ = scales
@@ -630,6 +708,89 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 moved = dropped @ rotations[static].T + translations[static]
                 self.flow_[self.ground_mask_] = moved - dropped
         self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
+        return self
+
+    def _ego_body(self, a, sweep, masks, known):
+        """Returns of the ego vehicle's body (:mod:`mmreg.sweeps._ego_body`), or None if none.
+
+        Candidates: points within ``_BODY_REACH tau`` of the sensor, off the ground,
+        that the other sweep holds within ``_BODY_MATCH tau`` at the same sensor
+        coordinates. The ego motion is found without them (from ``known`` if given) and
+        confirms those it carries off the second sweep. Returns ``(body, sweep_body,
+        ego)``, the ego motion to start the registration of the rest from.
+        """
+        if not _has_small_gicp():  # the body is told apart by GICP's ego motion
+            return None
+        tau = self._length_scale()
+        match = _BODY_MATCH * tau
+        exclude = (None, None) if masks is None else masks
+        candidates, sweep_candidates = fixed_candidates(
+            a,
+            sweep,
+            reach=_BODY_REACH * tau,
+            match=match,
+            exclude=exclude[0],
+            sweep_exclude=exclude[1],
+        )
+        if candidates.sum() < _MIN_BODY_POINTS or sweep_candidates.sum() < _MIN_BODY_POINTS:
+            return None
+        rest, sweep_rest = a[~candidates], sweep[~sweep_candidates]
+        if len(rest) < _MIN_SWEEP_POINTS or len(sweep_rest) < _MIN_SWEEP_POINTS:
+            return None
+        reach = _EGO_FINE_REACH * tau if known is not None else max(tau, self.max_displacement_)
+        rotation, translation, _ = ego_motion(
+            rest, sweep_rest, scale=tau, max_displacement=reach, init=known
+        )
+        ego = (rotation, translation)
+        body, sweep_body = confirm_body(
+            a,
+            sweep,
+            candidates,
+            sweep_candidates,
+            ego,
+            match=match,
+            cell=self.island_radius_,
+            near=(np.linalg.norm(a, axis=1) < _BODY_REACH * tau)
+            & (True if masks is None else ~masks[0]),
+        )
+        if body.sum() < _MIN_BODY_POINTS:
+            return None
+        return body, sweep_body, ego
+
+    def _fit_without_body(self, X, sweep, timing, masks, body):
+        """``_fit`` on the points off the ego vehicle's body; those are labelled -1.
+
+        They move with the sensor: their flow is zero (they stay at the same sensor
+        coordinates) and they join no cluster.
+        """
+        body, sweep_body, ego = body
+        keep, keep_sweep = ~body, ~sweep_body
+        times, sweep_times, interval = timing
+        ground, sweep_ground = (None, None) if masks is None else masks
+        self._fit(
+            X[keep],
+            sweep[keep_sweep],
+            None if times is None else np.asarray(times)[keep],
+            None if sweep_times is None else np.asarray(sweep_times)[keep_sweep],
+            interval,
+            None if ground is None else ground[keep],
+            None if sweep_ground is None else sweep_ground[keep_sweep],
+            known=ego,
+            find_body=False,
+        )
+        labels = np.full(len(X), -1, dtype=self.labels_.dtype)
+        labels[keep] = self.labels_
+        flow = np.zeros((len(X), self.flow_.shape[1]))
+        flow[keep] = self.flow_
+        self.labels_, self.flow_, self.outlier_mask_ = labels, flow, labels < 0
+        if self.ground_mask_ is not None:
+            ground_mask = np.zeros(len(X), dtype=bool)
+            ground_mask[keep] = self.ground_mask_
+            sweep_ground_mask = np.zeros(len(sweep), dtype=bool)
+            sweep_ground_mask[keep_sweep] = self.sweep_ground_mask_
+            self.ground_mask_, self.sweep_ground_mask_ = ground_mask, sweep_ground_mask
+        self.n_ego_body_ = int(body.sum())
+        self.ego_body_mask_ = body
         return self
 
     def _copy_estimator_state(self, estimator):
@@ -783,35 +944,80 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             R, t = result.rotations, result.translations
         return result
 
-    def _ego_motion(self, a, context):
-        """The dominant motion: ICP of the whole first sweep from the identity, coarse to fine.
+    def _ego_motion(self, a, context, known=None):
+        """The dominant motion: GICP from the identity (or ``known``), then our ICP.
 
-        Returns the motion and its robust point-to-plane residual scale. (GICP,
-        :func:`mmreg.sweeps._ego_motion.ego_motion`, is more accurate on real sweeps and finds
-        motions of several metres, but without a robust kernel it is pulled off where
-        moving objects make much of a scene; ``benchmarks/ego_motion.py`` compares them.)
+        GICP (:func:`mmreg.sweeps._ego_motion.ego_motion`, coarse to fine on voxels) finds
+        motions up to ``max(tau, max_displacement_)`` from the identity and is the more
+        accurate on real sweeps (static EPE 12-17 mm against 18-34 mm on the Argoverse 2
+        pairs), but where moving objects make much of a scene, or the sweeps are
+        noiseless, its voxels' covariances pull it centimetres off. Our raw-point ICP
+        (Tukey's kernel) is then run from GICP's motion and kept only when its robust
+        point-to-plane residual scale is under three quarters of GICP's: it is when GICP
+        is off by more than the sampling noise (0.002-0.5 of it on box and walker
+        scenes), never on real or ray-cast sweeps (0.89-1.02 of it;
+        ``benchmarks/results/ego_motion.md``).
+
+        Without small_gicp (Intel macOS has no wheel), our ICP alone, from the identity
+        (or ``known``) with a reach of twice then once ``max_distance_``.
+
+        Returns the motion and its robust point-to-plane residual scale.
         """
         sweep, tree, normals, rng, _ = context
         labels = np.zeros(len(a), dtype=np.intp)
         keep = subsample_groups(labels, self.max_points, rng)
         mask = np.full(len(a), -1, dtype=np.intp)
         mask[keep] = 0
-        rotation, translation = np.eye(3)[None], np.zeros((1, 3))
-        for reach in (2.0, 1.0):
-            result = multi_body_icp(
-                a,
-                mask,
-                rotation,
-                translation,
-                sweep,
-                tree=tree,
-                normals=normals,
-                max_distance=reach * self.max_distance_,
-                max_iter=self.max_icp_iter,
-                tol=_TOL * self.max_distance_,
-            )
-            rotation, translation = result.rotations, result.translations
-        return (rotation[0], translation[0]), float(result.scales[0])
+        if not _has_small_gicp():
+            rotation, translation = (np.eye(3), np.zeros(3)) if known is None else known
+            rotation, translation = rotation[None], translation[None]
+            for reach in (2.0, 1.0):
+                result = multi_body_icp(
+                    a,
+                    mask,
+                    rotation,
+                    translation,
+                    sweep,
+                    tree=tree,
+                    normals=normals,
+                    max_distance=reach * self.max_distance_,
+                    max_iter=self.max_icp_iter,
+                    tol=_TOL * self.max_distance_,
+                )
+                rotation, translation = result.rotations, result.translations
+            return (rotation[0], translation[0]), float(result.scales[0])
+        tau = self._length_scale()
+        reach = max(tau, self.max_displacement_)
+        if known is not None:  # a start within the fine stage's reach: no coarse stage
+            reach = _EGO_FINE_REACH * tau
+        rotation, translation, sigma = ego_motion(
+            a,
+            sweep,
+            scale=tau,
+            max_displacement=reach,
+            sweep_normals=normals,
+            init=known,
+        )
+        gicp = (rotation, translation)
+        result = multi_body_icp(
+            a,
+            mask,
+            rotation[None],
+            translation[None],
+            sweep,
+            tree=tree,
+            normals=normals,
+            max_distance=self.max_distance_,
+            max_iter=self.max_icp_iter,
+            tol=_TOL * self.max_distance_,
+        )
+        icp = (result.rotations[0], result.translations[0])
+        stride = -(-len(a) // _EGO_RESIDUAL_POINTS)
+        icp_sigma = _residual_scale(a[::stride], sweep, *icp, _EGO_FINE_REACH * tau, normals)
+        if icp_sigma < _EGO_EXACT_SHARE * sigma:
+            # The ICP's own scale (annealed, floored): the islands' tests were set with it.
+            return icp, float(result.scales[0])
+        return gicp, sigma
 
     def _island_motions(self, a, context, ego, sigma):
         """Every island's motion: the ego motion unless another one clearly explains it.
@@ -945,15 +1151,20 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             return None
         return ground, ground_mask(sweep, tau)
 
-    def _raw_with_ground(self, a, context, masks):
+    def _raw_with_ground(self, a, context, masks, known=None):
         """Two raw sweeps: the ego motion on everything, the objects off the ground.
 
         The ego-motion ICP aligns the whole sweeps (the ground holds roll, pitch and
         height); the islands, their hypotheses, the estimator and the object ICPs see the
         points off the ground of both sweeps; the ground joins the static world.
         """
-        ego, sigma = self._ego_motion(a, context)
+        ego, sigma = self._ego_motion(a, context, known)
         self.ego_motion_ = ego
+        if self.max_displacement == "auto":
+            # Other traffic moves about as fast as the sensor: sweeps far apart (2 Hz
+            # keyframes) need a reach that grows with the ego motion's step.
+            step = _TRAFFIC_PER_EGO * float(np.linalg.norm(ego[1]))
+            self.max_displacement_ = max(self.max_displacement_, step)
         if masks is None:
             return self._raw(a, context, ego, sigma)
         ground, sweep_ground = masks
