@@ -961,7 +961,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Without small_gicp (Intel macOS has no wheel), our ICP alone, from the identity
         (or ``known``) with a reach of twice then once ``max_distance_``.
 
-        Returns the motion and its robust point-to-plane residual scale.
+        Returns the motion, the ICP's motion (where the islands are tested) and its
+        robust point-to-plane residual scale.
         """
         sweep, tree, normals, rng, _ = context
         labels = np.zeros(len(a), dtype=np.intp)
@@ -985,7 +986,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                     tol=_TOL * self.max_distance_,
                 )
                 rotation, translation = result.rotations, result.translations
-            return (rotation[0], translation[0]), float(result.scales[0])
+            ego = (rotation[0], translation[0])
+            return ego, ego, float(result.scales[0])
         tau = self._length_scale()
         reach = max(tau, self.max_displacement_)
         if known is not None:  # a start within the fine stage's reach: no coarse stage
@@ -1014,10 +1016,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         icp = (result.rotations[0], result.translations[0])
         stride = -(-len(a) // _EGO_RESIDUAL_POINTS)
         icp_sigma = _residual_scale(a[::stride], sweep, *icp, _EGO_FINE_REACH * tau, normals)
-        if icp_sigma < _EGO_EXACT_SHARE * sigma:
-            # The ICP's own scale (annealed, floored): the islands' tests were set with it.
-            return icp, float(result.scales[0])
-        return gicp, sigma
+        # The islands' tests (their motions, the slow movers) weigh point-to-plane
+        # residuals on the raw points: they read them at the ICP's motion, the minimum
+        # of that cost, in the ICP's own scale (annealed, floored). At GICP's motion a
+        # static wall keeps a residual of a few millimetres that reads as a slow mover.
+        chosen = icp if icp_sigma < _EGO_EXACT_SHARE * sigma else gicp
+        return chosen, icp, float(result.scales[0])
 
     def _island_motions(self, a, context, ego, sigma):
         """Every island's motion: the ego motion unless another one clearly explains it.
@@ -1158,7 +1162,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         height); the islands, their hypotheses, the estimator and the object ICPs see the
         points off the ground of both sweeps; the ground joins the static world.
         """
-        ego, sigma = self._ego_motion(a, context, known)
+        ego, probe, sigma = self._ego_motion(a, context, known)
         self.ego_motion_ = ego
         if self.max_displacement == "auto":
             # Other traffic moves about as fast as the sensor: sweeps far apart (2 Hz
@@ -1166,7 +1170,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             step = _TRAFFIC_PER_EGO * float(np.linalg.norm(ego[1]))
             self.max_displacement_ = max(self.max_displacement_, step)
         if masks is None:
-            return self._raw(a, context, ego, sigma)
+            return self._raw(a, context, (ego, probe), sigma)
         ground, sweep_ground = masks
         self.ground_mask_, self.sweep_ground_mask_ = ground, sweep_ground
         sweep, _, _, rng, timing = context
@@ -1189,7 +1193,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             timing,
         )
         labels_off, estimator, rotations, translations, scales, sigmas, static = self._raw(
-            a[off], context, ego, sigma
+            a[off], context, (ego, probe), sigma
         )
         if static < 0:  # the ground is the static world's first member
             static = len(rotations)
@@ -1201,13 +1205,16 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         labels[off] = labels_off
         return labels, estimator, rotations, translations, scales, sigmas, static
 
-    def _raw(self, a, context, ego, sigma):
+    def _raw(self, a, context, egos, sigma):
+        # ``egos``: the ego motion reported (the static world's), and the one the islands
+        # are tested and the clusters started at (see _ego_motion).
+        ego, probe = egos
         sweep, tree, normals, rng, _ = context
-        islands, rotations, translations, _ = self._island_motions(a, context, ego, sigma)
+        islands, rotations, translations, _ = self._island_motions(a, context, probe, sigma)
         # Label 0: the ego motion, for the small islands and every static one.
         motions = (
-            np.concatenate([ego[0][None], rotations]),
-            np.concatenate([ego[1][None], translations]),
+            np.concatenate([probe[0][None], rotations]),
+            np.concatenate([probe[1][None], translations]),
         )
         labels = islands + 1
         previous = None
