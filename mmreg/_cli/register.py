@@ -371,6 +371,15 @@ def _add_fit_options(parser):
         help="distance gate in the units of the points (metres); 'none' turns it off; " + TAU_RULE,
     )
     parser.add_argument(
+        "--ego-motion",
+        metavar="T",
+        default=None,
+        help="the static world's known motion from the first frame to the second (odometry, "
+        "poses), b = R a + t: a 4x4 matrix in a .npy or 4 rows of 4 numbers in a .txt/.csv; "
+        "two raw sweeps start their ego ICP from it, a flow's static world is what moves "
+        "with it",
+    )
+    parser.add_argument(
         "--min-cluster-size", type=_positive_int, default=4, help="smallest cluster kept"
     )
     parser.add_argument("--max-iter", type=_count, default=10, help="most EM iterations")
@@ -553,6 +562,34 @@ def make_init(args, n):
     return check_labels(labels, n, path)
 
 
+def read_ego_motion(args):
+    """``(R, t)`` of ``--ego-motion``, or None; one clear line when the file is not one."""
+    path = getattr(args, "ego_motion", None)
+    if path is None:
+        return None
+    import numpy as np
+
+    from mmreg.em._static_world import check_ego_motion
+    from mmreg.io._arrays import _load_npy, _load_text_table
+    from mmreg.io._checks import _check_readable
+
+    path = Path(path)
+    with reading(path):
+        _check_readable(path, "--ego-motion")
+        matrix = _load_npy(path) if path.suffix.lower() == ".npy" else _load_text_table(path)
+    matrix = np.asarray(matrix, dtype=float)
+    if matrix.shape != (4, 4) or not np.allclose(matrix[3], [0, 0, 0, 1]):
+        raise CLIError(
+            f"{path}: --ego-motion takes a 4x4 homogeneous matrix (last row 0 0 0 1); got "
+            f"an array of shape {matrix.shape}"
+            + ("" if matrix.shape != (4, 4) else f" whose last row is {matrix[3].tolist()}")
+        )
+    try:
+        return check_ego_motion(matrix, 3)
+    except ValueError as error:
+        raise CLIError(f"{path}: {one_line(error)}") from None
+
+
 def read_sweep(args):
     """The second sweep's points (--sweep, or a sequence's next frame), or None.
 
@@ -698,6 +735,14 @@ def _fit(X, init, args, steps, sweep=None, timing=None):
             random_state=args.seed,
         )
     params = {} if sweep is None else {"sweep": sweep} | (timing or {})
+    ego = read_ego_motion(args)
+    if ego is not None:
+        if sweep is not None and X.shape[1] != 3:
+            raise CLIError(
+                "--ego-motion goes with two raw sweeps (points and --sweep) or with "
+                "correspondences alone, not with both a flow and --sweep"
+            )
+        params["ego_motion"] = ego
     name = "EM" if sweep is None else "EM and ICP on --sweep" + (" (deskewed)" if timing else "")
     with steps.step(name), reported_warnings():
         estimator.fit(X, **params)
