@@ -101,6 +101,29 @@ class SurfaceNormals:
         self._normals = np.full((len(points), 3), np.nan)
         self._variation = np.full(len(points), np.nan)
         self._flatness = np.full(len(points), np.nan)
+        self._spacing = np.full(len(points), np.nan)
+
+    def _missing(self, index, known):
+        """The distinct points of ``index`` (sorted) whose ``known`` value is still NaN."""
+        unknown = index[np.isnan(known[index])]
+        if not len(unknown):
+            return unknown
+        flag = np.zeros(len(self.points), dtype=bool)  # a sort of ``unknown`` costs more
+        flag[unknown] = True
+        return np.flatnonzero(flag)
+
+    def spacing(self, index):
+        """Distance from each of ``points[index]`` to its nearest other point.
+
+        The sampling spacing there, as ``tree.query(points[index], k=2)`` gives it; read
+        off the normals' neighbourhoods where they are known.
+        """
+        index = np.asarray(index, dtype=np.intp)
+        missing = self._missing(index, self._spacing)
+        if len(missing):
+            distance, _ = self.tree.query(self.points[missing], k=2, workers=self.workers)
+            self._spacing[missing] = distance[:, 1]
+        return self._spacing[index]
 
     def __call__(self, index):
         """Normals ``(len(index), 3)``, surface variations and flatness of ``points[index]``.
@@ -110,10 +133,12 @@ class SurfaceNormals:
         flatness is ``l_1 / l_2``: 0 on a line.
         """
         index = np.asarray(index, dtype=np.intp)
-        missing = np.unique(index[np.isnan(self._variation[index])])
+        missing = self._missing(index, self._variation)
         if len(missing):
-            _, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
+            distance, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
             near = near.reshape(len(missing), self.k)
+            if self.k > 1:  # the nearest other point: the spacing, for free
+                self._spacing[missing] = distance.reshape(len(missing), self.k)[:, 1]
             hood = self.points[near]
             hood = hood - hood.mean(axis=1, keepdims=True)
             covariance = np.einsum("nki,nkj->nij", hood, hood)
@@ -218,6 +243,7 @@ def multi_body_icp(
     min_flatness=0.2,
     normal_neighbors=10,
     workers=1,
+    measure=True,
 ):
     """Refine every cluster's motion on a target point set by robust point-to-plane ICP.
 
@@ -256,6 +282,10 @@ def multi_body_icp(
         ``k`` of the normals' neighbourhoods.
     workers : int
         Threads of the KD-tree queries.
+    measure : bool
+        Whether ``scales``, ``n_matched`` and ``inlier_share`` are measured at the final
+        motions (one more query of every point). False: they are those of the last
+        step's start, for callers that need only the motions.
 
     Returns
     -------
@@ -305,6 +335,8 @@ def multi_body_icp(
     alive = np.ones(n_clusters, dtype=bool)
     for iteration in range(max_iter + 1):
         final = converged or iteration == max_iter
+        if final and not measure and iteration:
+            break
         if final or alive.all():
             points, group = every_point, every_group
         else:

@@ -28,6 +28,7 @@ from sklearn.utils import check_random_state
 from mmreg._grouping import group_centroids
 from mmreg._icp import subsample_groups
 from mmreg._motion import moving_clusters
+from mmreg._unique_rows import unique_rows
 
 __all__ = ["choose_island_motions", "point_costs", "translation_starts"]
 
@@ -148,8 +149,8 @@ def translation_starts(
     offsets = sample[target] - moved[voters][source]
     bins = np.floor(offsets / bin_size).astype(np.int64)
     # Every voter votes once per bin: a dense patch of the sweep must not outvote.
-    key = np.unique(np.column_stack([islands[voters][source], bins, source]), axis=0)
-    votes, count = np.unique(key[:, :4], axis=0, return_counts=True)
+    key = unique_rows(np.column_stack([islands[voters][source], bins, source]))
+    votes, count = unique_rows(key[:, :4], return_counts=True)
     order = np.lexsort((-count, votes[:, 0]))
     votes = votes[order]
     first = np.searchsorted(votes[:, 0], votes[:, 0], side="left")

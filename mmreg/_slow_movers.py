@@ -69,20 +69,25 @@ _JOIN = 0.5
 _GROWTH_STEPS = 10
 
 
-def _spacing_ratio(points, tree, sweep):
+def _spacing_ratio(points, tree, sweep, normals=None):
     """Distance of each point to the sweep in units of the sweep's spacing there.
 
-    Also returns the index of the nearest sweep point and the spacing.
+    Also returns the index of the nearest sweep point and the spacing. ``normals``: the
+    sweep's :class:`mmreg._icp.SurfaceNormals`, which keeps every spacing it finds
+    (these tests ask about the same sweep points again and again).
     """
     distance, nearest = tree.query(points)
-    # Many points share their nearest sweep point: its spacing is found once.
-    unique, inverse = np.unique(nearest, return_inverse=True)
-    spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
+    if normals is not None:
+        spacing = normals.spacing(nearest)
+    else:
+        # Many points share their nearest sweep point: its spacing is found once.
+        unique, inverse = np.unique(nearest, return_inverse=True)
+        spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
     spacing = np.maximum(spacing, np.finfo(float).tiny)
     return distance / spacing, nearest, spacing
 
 
-def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep):
+def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep, normals=None):
     """Whether each group's motion moves its points more than 2 spacings from the ego's.
 
     The displacement (median over the group's points) between where its own motion and
@@ -102,6 +107,8 @@ def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep):
         ``(R, t)`` of the ego motion.
     tree : cKDTree of ``sweep``
     sweep : ndarray of shape (m, 3)
+    normals : SurfaceNormals of ``sweep`` or None
+        Its spacings are kept there.
 
     Returns
     -------
@@ -109,7 +116,7 @@ def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep):
     """
     rotations, translations = motions
     moved = np.einsum("nij,nj->ni", rotations[groups], points) + translations[groups]
-    _, _, spacing = _spacing_ratio(moved, tree, sweep)
+    _, _, spacing = _spacing_ratio(moved, tree, sweep, normals)
     resting = points @ ego[0].T + ego[1]
     departure = _group_median(np.linalg.norm(moved - resting, axis=1), groups, n_groups)
     return departure > _MIN_SPACINGS * _group_median(spacing, groups, n_groups)
@@ -123,7 +130,7 @@ def _unexplained(points, tree, sweep, normals):
     spacing off its plane (a point of a surface the other sweep saw elsewhere, e.g.
     behind a moving object, lies on the plane but far from its points).
     """
-    ratio, nearest, spacing = _spacing_ratio(points, tree, sweep)
+    ratio, nearest, spacing = _spacing_ratio(points, tree, sweep, normals)
     far = np.flatnonzero(ratio > _UNEXPLAINED)
     unexplained = np.zeros(len(points), dtype=bool)
     if len(far):
@@ -236,11 +243,12 @@ def slow_movers(
         max_distance=max_distance,
         max_iter=max_iter,
         tol=tol,
+        measure=False,
     )
     R, t = result.rotations, result.translations
     g = seeds[chosen]
     after = np.einsum("nij,nj->ni", R[g], a[chosen]) + t[g]
-    ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep)
+    ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep, normals)
     explained = ratio_after <= _UNEXPLAINED
     counts = np.maximum(np.bincount(g, minlength=n_seeds), 1)
     share = np.bincount(g, weights=explained, minlength=n_seeds) / counts
@@ -283,7 +291,7 @@ def _members(a, free, unexplained, seeds, accepted, R, t, target, cell, min_size
     k = owner[islands[rows]]
     moved = np.einsum("nij,nj->ni", R[k], a[rows]) + t[k]
     sweep, tree, normals = target
-    ratio_new, _, _ = _spacing_ratio(moved, tree, sweep)
+    ratio_new, _, _ = _spacing_ratio(moved, tree, sweep, normals)
     # The core: the points the new motion explains and the ego motion does not. Points
     # both explain (a wall the object slides along, the object's faces parallel to
     # its motion) join only where most of their nearest neighbours have joined: the

@@ -118,8 +118,8 @@ def _join_slides(a, labels, motions, static, sigma, target):
     (``sigma``, the same point-to-plane residual) the data cannot tell the cluster from
     the static world: it joins it, with the static world's motion. So does a cluster
     whose motion moves its points (median) by less than half the second sweep's sampling
-    spacing where they land (``target``: the second sweep and its cKDTree): no sweep can
-    show such a motion, whatever the noise.
+    spacing where they land (``target``: the second sweep, its cKDTree and its
+    SurfaceNormals): no sweep can show such a motion, whatever the noise.
 
     ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; returns the
     labels, the same arrays without the joined clusters, and the static world's new
@@ -139,8 +139,8 @@ def _join_slides(a, labels, motions, static, sigma, target):
     n_clusters = len(rotations)
     counts = np.maximum(np.bincount(group, minlength=n_clusters), 1)
     evidence = np.sqrt(np.bincount(group, weights=along**2, minlength=n_clusters) / counts)
-    sweep, tree = target
-    _, _, spacing = _spacing_ratio(moved, tree, sweep)
+    sweep, tree, sweep_normals = target
+    _, _, spacing = _spacing_ratio(moved, tree, sweep, sweep_normals)
     departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
     slides = np.bincount(group, minlength=n_clusters) > 0
@@ -855,6 +855,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_distance=self.max_distance_,
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
             tol=_TOL * self.max_distance_,
+            measure=False,
         )
         motions = (result.rotations, result.translations)
         inside = np.flatnonzero(islands >= 0)
@@ -879,7 +880,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         # sweep's sampling spacings has not moved (its better fit is another sampling).
         if moving.any():
             moving &= beyond_spacing(
-                a[chosen], islands[chosen], n_islands, (rotations, translations), ego, tree, sweep
+                a[chosen],
+                islands[chosen],
+                n_islands,
+                (rotations, translations),
+                ego,
+                tree,
+                sweep,
+                normals,
             )
             rotations[~moving], translations[~moving] = ego
         # Objects that move by a few sampling spacings stay within the ego motion's
@@ -1023,7 +1031,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sigmas = np.asarray(getattr(estimator, "sigmas_", np.full(len(rotations), np.nan)))
         if static >= 0:
             labels, (rotations, translations, scales, sigmas), static = _join_slides(
-                a, labels, (rotations, translations, scales, sigmas), static, sigma, (sweep, tree)
+                a,
+                labels,
+                (rotations, translations, scales, sigmas),
+                static,
+                sigma,
+                (sweep, tree, normals),
             )
         return labels, estimator, rotations, translations, scales, sigmas, static
 
