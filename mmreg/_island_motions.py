@@ -72,6 +72,7 @@ def translation_starts(
     max_displacement,
     bin_size,
     random_state=None,
+    moved=None,
 ):
     """Starting translations of every island, relative to the ego motion.
 
@@ -94,6 +95,8 @@ def translation_starts(
     bin_size : float
         Side of the histogram's bins.
     random_state : int, RandomState instance or None
+    moved : ndarray of shape (n, 3) or None
+        ``a`` moved by the ego motion, when the caller has it already.
 
     Returns
     -------
@@ -117,8 +120,8 @@ def translation_starts(
     True
     """
     rng = check_random_state(random_state)
-    rotation, translation = ego
-    moved = a @ rotation.T + translation
+    if moved is None:
+        moved = a @ ego[0].T + ego[1]
     starts = np.full((n_islands, 1 + _CENTROID_STARTS + _PEAKS, 3), np.nan)
     starts[:, 0] = 0.0
     if n_islands == 0:

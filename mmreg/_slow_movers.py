@@ -47,6 +47,7 @@ from scipy.spatial import cKDTree
 from mmreg._icp import multi_body_icp, subsample_groups
 from mmreg._islands import voxel_islands
 from mmreg._motion import _group_median
+from mmreg._unique_rows import unique_rows
 
 __all__ = ["beyond_spacing", "slow_movers"]
 
@@ -155,6 +156,7 @@ def slow_movers(
     max_iter,
     tol,
     random_state,
+    moved=None,
 ):
     """Small objects that move by a few sampling spacings, found point by point.
 
@@ -182,6 +184,8 @@ def slow_movers(
     max_distance, max_iter, tol
         Of the ICP (:func:`mmreg._icp.multi_body_icp`).
     random_state : RandomState
+    moved : ndarray of shape (n, 3) or None
+        ``a`` moved by the ego motion, when the caller has it already.
 
     Returns
     -------
@@ -220,7 +224,8 @@ def slow_movers(
     n = len(a)
     sweep, tree, normals = target
     none = (np.full(n, -1, dtype=np.intp), np.zeros((0, 3, 3)), np.zeros((0, 3)))
-    moved = a @ ego[0].T + ego[1]
+    if moved is None:
+        moved = a @ ego[0].T + ego[1]
     unexplained, _ = _unexplained(moved, tree, sweep, normals)
     candidates = np.flatnonzero(free & unexplained)
     if len(candidates) < min_size:
@@ -256,7 +261,7 @@ def slow_movers(
     seed_spacing = _group_median(spacing, g, n_seeds)
     # The second sweep's points the seed lands on, and whether the first sweep at rest
     # explains them (its spacing measured among its own points).
-    pairs = np.unique(np.column_stack([g[explained], landing[explained]]), axis=0)
+    pairs = unique_rows(np.column_stack([g[explained], landing[explained]]))
     if len(pairs):
         near, _, _ = _spacing_ratio(sweep[pairs[:, 1]], resting, resting.data)
         at_rest = np.bincount(pairs[:, 0], weights=near <= _UNEXPLAINED, minlength=n_seeds)
@@ -279,8 +284,8 @@ def _members(a, free, unexplained, seeds, accepted, R, t, target, cell, min_size
     islands, _ = voxel_islands(a, cell, 1)
     # Every island goes to the accepted seed with the most points in it.
     in_seed = np.flatnonzero(np.isin(seeds, accepted))
-    pairs, votes = np.unique(
-        np.column_stack([islands[in_seed], seeds[in_seed]]), axis=0, return_counts=True
+    pairs, votes = unique_rows(
+        np.column_stack([islands[in_seed], seeds[in_seed]]), return_counts=True
     )
     order = np.lexsort((-votes, pairs[:, 0]))
     pairs = pairs[order]

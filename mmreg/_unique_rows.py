@@ -79,7 +79,8 @@ def _unique_keys(keys, return_index, return_inverse, return_counts):
     n = len(keys)
     order = None
     if return_index or return_inverse:
-        order = np.argsort(keys, kind="stable")  # stable: an index is a first occurrence
+        # Stable where an index must be a first occurrence.
+        order = np.argsort(keys, kind="stable" if return_index else None)
         ordered = keys[order]
     else:
         ordered = np.sort(keys)

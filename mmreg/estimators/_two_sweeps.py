@@ -822,6 +822,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sweep, tree, normals, rng, _ = context
         islands, n_islands = voxel_islands(a, self.island_radius_, self.min_island_size)
         islands2, n_islands2 = voxel_islands(sweep, self.island_radius_, self.min_island_size)
+        at_rest = a @ ego[0].T + ego[1]  # the first sweep where the ego motion puts it
         starts = translation_starts(
             a,
             islands,
@@ -833,6 +834,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_displacement=self.max_displacement_,
             bin_size=_BIN * self.max_distance_,
             random_state=rng,
+            moved=at_rest,
         )
         n_starts = starts.shape[1]
         # Every (island, start) pair is one cluster of one multi-body ICP.
@@ -859,7 +861,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         )
         motions = (result.rotations, result.translations)
         inside = np.flatnonzero(islands >= 0)
-        resting = cKDTree(a[inside] @ ego[0].T + ego[1])
+        resting = cKDTree(at_rest[inside])
         moving, pick = choose_island_motions(
             a[chosen],
             islands[chosen],
@@ -907,6 +909,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
             tol=_TOL * self.max_distance_,
             random_state=rng,
+            moved=at_rest,
         )
         if len(slow_rotations):
             islands = np.where(slow >= 0, n_islands + slow, islands)
