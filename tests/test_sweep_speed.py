@@ -82,3 +82,20 @@ def test_icp_without_the_final_measurement_moves_the_same():
         np.testing.assert_array_equal(quick.translations, measured.translations)
         assert quick.n_iter == measured.n_iter
     np.testing.assert_allclose(measured.translations, [[0.1, 0, 0], [0.0, 0.1, 0.05]], atol=0.02)
+
+
+def test_threads_of_the_icp_queries_change_nothing():
+    """The estimator's n_jobs also threads the ICPs' queries: the same answer, bit for bit."""
+    from mmreg import MultiModelRegistration, SweepRegistration
+    from mmreg.datasets import make_lidar_sweeps
+
+    scene = make_lidar_sweeps(n_moving=2, n_parked=1, n_beams=16, n_azimuths=512, random_state=0)
+    fits = [
+        SweepRegistration(
+            MultiModelRegistration(variant="sweep", tau=5.0, n_jobs=n_jobs), random_state=0
+        ).fit(scene.a, sweep=scene.sweep)
+        for n_jobs in (None, 2)
+    ]
+    np.testing.assert_array_equal(fits[0].labels_, fits[1].labels_)
+    np.testing.assert_array_equal(fits[0].flow_, fits[1].flow_)
+    assert fits[0].n_clusters_ >= 2  # the static world and at least one car

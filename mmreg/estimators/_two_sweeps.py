@@ -29,6 +29,7 @@ from mmreg._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg._island_motions import choose_island_motions, translation_starts
 from mmreg._islands import voxel_islands
 from mmreg._motion import _group_median, moving_clusters, static_cluster
+from mmreg._neighbors import query_workers
 from mmreg._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
 from mmreg._validation import check_coordinate_range, invalid_rows
 
@@ -232,6 +233,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     estimator : estimator or None, default=None
         The multi-model estimator (fitted on clones). None:
         ``MultiModelRegistration(variant="sweep", tau=5.0)``, the variant for real LiDAR.
+        Its ``n_jobs``, if it has one, also sets the threads of the ICPs' k-d tree
+        queries (the same answers; None: one thread).
     refine : {"moving", "all"}, default="moving"
         Which clusters' motions are refined in refinement mode. ``"moving"`` keeps the
         static world's motion from the correspondences: a network's flow on the static
@@ -602,7 +605,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.ground_mask_ = self.sweep_ground_mask_ = None
         a = X[:, :3]
         tree = cKDTree(sweep)
-        normals = SurfaceNormals(sweep, tree, 10)
+        normals = SurfaceNormals(sweep, tree, 10, self._workers())
         context = (sweep, tree, normals, rng, timing)
         if X.shape[1] == 6:
             estimator = self._make_estimator(rng).fit(X)
@@ -718,7 +721,18 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_distance=self.max_distance_,
             max_iter=self.max_icp_iter,
             tol=_TOL * self.max_distance_,
+            workers=self._workers(),
         )
+
+    def _workers(self):
+        """Threads of the ICPs' k-d tree queries: the estimator's ``n_jobs`` (None: one).
+
+        The answers are the same with any number (each point's query is its own).
+        """
+        n_jobs = None
+        if self.estimator is not None:
+            n_jobs = self.estimator.get_params(deep=False).get("n_jobs")
+        return query_workers(n_jobs)
 
     def _deskewed_icp(
         self, a, labels, group, part, rotations, translations, static, sweep, timing, rounds
@@ -777,7 +791,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             centres2 = np.einsum("kij,kj->ki", R, centres) + t
             target = deskew(sweep[local], owner, fractions, *second, centres2, turn=False)
             target_tree = cKDTree(target)
-            normals = SurfaceNormals(target, target_tree, 10)
+            normals = SurfaceNormals(target, target_tree, 10, self._workers())
             result = self._icp(points, group, R, t, target, target_tree, normals)
             R, t = result.rotations, result.translations
         return result
@@ -858,6 +872,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
             tol=_TOL * self.max_distance_,
             measure=False,
+            workers=self._workers(),
         )
         motions = (result.rotations, result.translations)
         inside = np.flatnonzero(islands >= 0)
@@ -983,7 +998,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         context = (
             sweep_off_points,
             tree,
-            SurfaceNormals(sweep_off_points, tree, 10),
+            SurfaceNormals(sweep_off_points, tree, 10, self._workers()),
             rng,
             timing,
         )
