@@ -48,7 +48,8 @@ import mmreg.estimators._two_sweeps as two_sweeps  # noqa: E402
 from mmreg import SweepRegistration  # noqa: E402
 from mmreg.estimators import _multi_model_registration  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
+# The command line runs the mmreg imported here (PYTHONPATH), not necessarily this tree's.
+ROOT = Path(two_sweeps.__file__).resolve().parents[2]
 NEIGHBOURS = 8
 
 # (label, owner, attribute, caller): the stages of a raw fit, timed where
