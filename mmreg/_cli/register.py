@@ -402,8 +402,8 @@ def _add_fit_options(parser):
         "--n-jobs",
         type=_n_jobs,
         default=1,
-        help="threads of the k-d tree queries of the initial clustering and the EM "
-        "(MultiModelRegistration's n_jobs; -1: every core)",
+        help="threads of the k-d tree queries of the initial clustering, the EM and, with "
+        "--sweep, the ICPs (MultiModelRegistration's n_jobs; -1: every core)",
     )
 
 

@@ -26,6 +26,7 @@ from sklearn.utils.validation import validate_data
 from mmreg._array.flow import rigid_flow
 from mmreg._array.grouping import group_bounds
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
+from mmreg._array.neighbors import query_workers
 from mmreg._validation import check_coordinate_range, invalid_rows
 from mmreg.sweeps._deskew import deskew, relative_motions
 from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
@@ -143,8 +144,8 @@ def _join_slides(a, labels, motions, static, sigma, target):
     (``sigma``, the same point-to-plane residual) the data cannot tell the cluster from
     the static world: it joins it, with the static world's motion. So does a cluster
     whose motion moves its points (median) by less than half the second sweep's sampling
-    spacing where they land (``target``: the second sweep and its cKDTree): no sweep can
-    show such a motion, whatever the noise.
+    spacing where they land (``target``: the second sweep, its cKDTree and its
+    SurfaceNormals): no sweep can show such a motion, whatever the noise.
 
     ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; returns the
     labels, the same arrays without the joined clusters, and the static world's new
@@ -164,8 +165,8 @@ def _join_slides(a, labels, motions, static, sigma, target):
     n_clusters = len(rotations)
     counts = np.maximum(np.bincount(group, minlength=n_clusters), 1)
     evidence = np.sqrt(np.bincount(group, weights=along**2, minlength=n_clusters) / counts)
-    sweep, tree = target
-    _, _, spacing = _spacing_ratio(moved, tree, sweep)
+    sweep, tree, sweep_normals = target
+    _, _, spacing = _spacing_ratio(moved, tree, sweep, sweep_normals)
     departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
     slides = np.bincount(group, minlength=n_clusters) > 0
@@ -260,6 +261,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     estimator : estimator or None, default=None
         The multi-model estimator (fitted on clones). None:
         ``MultiModelRegistration(variant="sweep", tau=5.0)``, the variant for real LiDAR.
+        Its ``n_jobs``, if it has one, also sets the threads of the ICPs' k-d tree
+        queries (the same answers; None: one thread).
     refine : {"moving", "all"}, default="moving"
         Which clusters' motions are refined in refinement mode. ``"moving"`` keeps the
         static world's motion from the correspondences: a network's flow on the static
@@ -675,7 +678,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.ground_mask_ = self.sweep_ground_mask_ = None
         a = X[:, :3]
         tree = cKDTree(sweep)
-        normals = SurfaceNormals(sweep, tree, 10)
+        normals = SurfaceNormals(sweep, tree, 10, self._workers())
         context = (sweep, tree, normals, rng, timing)
         if X.shape[1] == 6:
             estimator = self._make_estimator(rng).fit(X)
@@ -880,7 +883,18 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_distance=self.max_distance_,
             max_iter=self.max_icp_iter,
             tol=_TOL * self.max_distance_,
+            workers=self._workers(),
         )
+
+    def _workers(self):
+        """Threads of the ICPs' k-d tree queries: the estimator's ``n_jobs`` (None: one).
+
+        The answers are the same with any number (each point's query is its own).
+        """
+        n_jobs = None
+        if self.estimator is not None:
+            n_jobs = self.estimator.get_params(deep=False).get("n_jobs")
+        return query_workers(n_jobs)
 
     def _deskewed_icp(
         self, a, labels, group, part, rotations, translations, static, sweep, timing, rounds
@@ -939,7 +953,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             centres2 = np.einsum("kij,kj->ki", R, centres) + t
             target = deskew(sweep[local], owner, fractions, *second, centres2, turn=False)
             target_tree = cKDTree(target)
-            normals = SurfaceNormals(target, target_tree, 10)
+            normals = SurfaceNormals(target, target_tree, 10, self._workers())
             result = self._icp(points, group, R, t, target, target_tree, normals)
             R, t = result.rotations, result.translations
         return result
@@ -1033,6 +1047,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sweep, tree, normals, rng, _ = context
         islands, n_islands = voxel_islands(a, self.island_radius_, self.min_island_size)
         islands2, n_islands2 = voxel_islands(sweep, self.island_radius_, self.min_island_size)
+        at_rest = a @ ego[0].T + ego[1]  # the first sweep where the ego motion puts it
         starts = translation_starts(
             a,
             islands,
@@ -1044,6 +1059,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_displacement=self.max_displacement_,
             bin_size=_BIN * self.max_distance_,
             random_state=rng,
+            moved=at_rest,
         )
         n_starts = starts.shape[1]
         # Every (island, start) pair is one cluster of one multi-body ICP.
@@ -1066,10 +1082,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_distance=self.max_distance_,
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
             tol=_TOL * self.max_distance_,
+            measure=False,
+            workers=self._workers(),
         )
         motions = (result.rotations, result.translations)
         inside = np.flatnonzero(islands >= 0)
-        resting = cKDTree(a[inside] @ ego[0].T + ego[1])
+        resting = cKDTree(at_rest[inside])
         moving, pick = choose_island_motions(
             a[chosen],
             islands[chosen],
@@ -1090,7 +1108,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         # sweep's sampling spacings has not moved (its better fit is another sampling).
         if moving.any():
             moving &= beyond_spacing(
-                a[chosen], islands[chosen], n_islands, (rotations, translations), ego, tree, sweep
+                a[chosen],
+                islands[chosen],
+                n_islands,
+                (rotations, translations),
+                ego,
+                tree,
+                sweep,
+                normals,
             )
             rotations[~moving], translations[~moving] = ego
         # Objects that move by a few sampling spacings stay within the ego motion's
@@ -1110,6 +1135,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
             tol=_TOL * self.max_distance_,
             random_state=rng,
+            moved=at_rest,
         )
         if len(slow_rotations):
             islands = np.where(slow >= 0, n_islands + slow, islands)
@@ -1188,7 +1214,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         context = (
             sweep_off_points,
             tree,
-            SurfaceNormals(sweep_off_points, tree, 10),
+            SurfaceNormals(sweep_off_points, tree, 10, self._workers()),
             rng,
             timing,
         )
@@ -1242,7 +1268,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sigmas = np.asarray(getattr(estimator, "sigmas_", np.full(len(rotations), np.nan)))
         if static >= 0:
             labels, (rotations, translations, scales, sigmas), static = _join_slides(
-                a, labels, (rotations, translations, scales, sigmas), static, sigma, (sweep, tree)
+                a,
+                labels,
+                (rotations, translations, scales, sigmas),
+                static,
+                sigma,
+                (sweep, tree, normals),
             )
         return labels, estimator, rotations, translations, scales, sigmas, static
 

@@ -7,7 +7,6 @@ from numbers import Integral, Real
 import numpy as np
 from scipy.spatial import cKDTree
 from sklearn.base import _fit_context
-from sklearn.cluster import DBSCAN
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mmreg._array.neighbors import query_workers
@@ -73,6 +72,8 @@ def _open3d_dbscan(points, eps, min_samples, workers=1):
 
 
 def _sklearn_dbscan(points, eps, min_samples, n_jobs):
+    from sklearn.cluster import DBSCAN  # imported when used: sklearn.cluster costs start-up
+
     model = DBSCAN(eps=eps, min_samples=min_samples, n_jobs=n_jobs).fit(points)
     core = np.zeros(len(points), dtype=bool)
     core[model.core_sample_indices_] = True

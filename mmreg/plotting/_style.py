@@ -16,12 +16,14 @@ _BACKGROUND_RATIO = 1.5
 
 def _qualitative(n):
     """``n`` distinct colours: tab10 without its grey, then tab20's light shades, then husl."""
-    import seaborn as sns
+    from matplotlib import colormaps
 
-    tab10 = [c for i, c in enumerate(sns.color_palette("tab10", 10)) if i != _GREY_TAB10]
-    light = [c for i, c in enumerate(sns.color_palette("tab20", 20)) if i % 2 and i != 15]
+    tab10 = [c for i, c in enumerate(colormaps["tab10"].colors) if i != _GREY_TAB10]
+    light = [c for i, c in enumerate(colormaps["tab20"].colors) if i % 2 and i != 15]
     colors = tab10 + light
     if n > len(colors):
+        import seaborn as sns  # its import costs a second: only for the 18th colour on
+
         colors += sns.color_palette("husl", n - len(colors))
     return np.array(colors[:n], dtype=float).reshape(n, 3)
 

@@ -7,6 +7,8 @@ picture's choices can be tested without rendering it.
 
 import numpy as np
 
+from mmreg._array.unique_rows import unique_rows
+
 # Arrow lengths, as shares of the window's width: the typical arrow is aimed at _TARGET,
 # none is longer than _MAX, and one shorter than _MIN on screen is drawn at _MIN (a slow
 # object's arrow would otherwise be hidden under its own head).
@@ -39,7 +41,7 @@ def marker_diameter(xy, points_per_metre):
     xy = np.asarray(xy, dtype=float)[:, :2]
     if not len(xy):
         return _MIN_DIAMETER
-    cells = np.unique(np.floor(xy / _CELL).astype(np.int64), axis=0)
+    cells = unique_rows(np.floor(xy / _CELL).astype(np.int64))
     share = np.sqrt(len(cells) * _CELL**2 / len(xy))  # metres per point, across
     return float(np.clip(share * points_per_metre, _MIN_DIAMETER, _MAX_DIAMETER))
 

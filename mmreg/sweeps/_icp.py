@@ -39,6 +39,9 @@ _DEGENERATE = 1e-3
 _MIN_MATCHES = 12
 # The kernel's scale shrinks by this factor per iteration until it reaches the robust one.
 _ANNEAL = 0.7
+# The lower triangle of a 6x6 matrix, row by row: a Hessian is summed there and mirrored
+# (numpy's eigh reads the lower triangle only).
+_LOWER = np.tril_indices(6)
 
 
 def rotation_vectors_to_matrices(omega):
@@ -101,6 +104,29 @@ class SurfaceNormals:
         self._normals = np.full((len(points), 3), np.nan)
         self._variation = np.full(len(points), np.nan)
         self._flatness = np.full(len(points), np.nan)
+        self._spacing = np.full(len(points), np.nan)
+
+    def _missing(self, index, known):
+        """The distinct points of ``index`` (sorted) whose ``known`` value is still NaN."""
+        unknown = index[np.isnan(known[index])]
+        if not len(unknown):
+            return unknown
+        flag = np.zeros(len(self.points), dtype=bool)  # a sort of ``unknown`` costs more
+        flag[unknown] = True
+        return np.flatnonzero(flag)
+
+    def spacing(self, index):
+        """Distance from each of ``points[index]`` to its nearest other point.
+
+        The sampling spacing there, as ``tree.query(points[index], k=2)`` gives it; read
+        off the normals' neighbourhoods where they are known.
+        """
+        index = np.asarray(index, dtype=np.intp)
+        missing = self._missing(index, self._spacing)
+        if len(missing):
+            distance, _ = self.tree.query(self.points[missing], k=2, workers=self.workers)
+            self._spacing[missing] = distance[:, 1]
+        return self._spacing[index]
 
     def __call__(self, index):
         """Normals ``(len(index), 3)``, surface variations and flatness of ``points[index]``.
@@ -110,10 +136,12 @@ class SurfaceNormals:
         flatness is ``l_1 / l_2``: 0 on a line.
         """
         index = np.asarray(index, dtype=np.intp)
-        missing = np.unique(index[np.isnan(self._variation[index])])
+        missing = self._missing(index, self._variation)
         if len(missing):
-            _, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
+            distance, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
             near = near.reshape(len(missing), self.k)
+            if self.k > 1:  # the nearest other point: the spacing, for free
+                self._spacing[missing] = distance.reshape(len(missing), self.k)[:, 1]
             hood = self.points[near]
             hood = hood - hood.mean(axis=1, keepdims=True)
             covariance = np.einsum("nki,nkj->nij", hood, hood)
@@ -134,6 +162,18 @@ def _group_sums(values, groups, n_groups):
     n = len(groups)
     indicator = sparse.csr_matrix((np.ones(n), (groups, np.arange(n))), shape=(n_groups, n))
     return np.asarray(indicator @ values)
+
+
+def _sorted_indicator(groups, n_groups):
+    """The 0/1 matrix ``(n_groups, n)`` of ``groups`` sorted ascending, built without a sort.
+
+    Its product with ``values`` sums each group's rows in their order, one after the
+    other, as :func:`_group_sums` does (the same floats).
+    """
+    n = len(groups)
+    ends = np.cumsum(np.bincount(groups, minlength=n_groups))
+    indptr = np.concatenate([[0], ends])
+    return sparse.csr_matrix((np.ones(n), np.arange(n), indptr), shape=(n_groups, n))
 
 
 def subsample_groups(labels, max_per_group, random_state=None):
@@ -218,6 +258,7 @@ def multi_body_icp(
     min_flatness=0.2,
     normal_neighbors=10,
     workers=1,
+    measure=True,
 ):
     """Refine every cluster's motion on a target point set by robust point-to-plane ICP.
 
@@ -256,6 +297,10 @@ def multi_body_icp(
         ``k`` of the normals' neighbourhoods.
     workers : int
         Threads of the KD-tree queries.
+    measure : bool
+        Whether ``scales``, ``n_matched`` and ``inlier_share`` are measured at the final
+        motions (one more query of every point). False: they are those of the last
+        step's start, for callers that need only the motions.
 
     Returns
     -------
@@ -299,12 +344,17 @@ def multi_body_icp(
     if not n_clusters or not len(members):
         return ICPResult(rotations, translations, scales, n_matched, inlier_share, 0, True)
     sizes = np.bincount(group, minlength=n_clusters)
-    every_point, every_group = points, group
+    # The points sorted by cluster, stably: every cluster's points keep their order (so
+    # do its sums and medians, to the bit), and its sums need no sort of their own.
+    order = np.argsort(group, kind="stable")
+    every_point, every_group = points[order], group[order]
     # A cluster whose step fell below ``tol`` is done: later iterations leave its points
     # out (hypothesis tests run hundreds of clusters, most of which settle early).
     alive = np.ones(n_clusters, dtype=bool)
     for iteration in range(max_iter + 1):
         final = converged or iteration == max_iter
+        if final and not measure and iteration:
+            break
         if final or alive.all():
             points, group = every_point, every_group
         else:
@@ -340,23 +390,34 @@ def multi_body_icp(
             break
         # Linearise about each cluster's centroid of matched points: a rotation about a
         # far-away origin would couple with the translation and condition badly.
+        indicator = _sorted_indicator(g, n_clusters)  # g is sorted: rows ascend
         weight_sums = np.bincount(g, weights=weight, minlength=n_clusters)
         centroid = (
-            _group_sums(weight[:, None] * p, g, n_clusters)
-            / np.maximum(weight_sums, 1e-300)[:, None]
+            np.asarray(indicator @ (weight[:, None] * p)) / np.maximum(weight_sums, 1e-300)[:, None]
         )
         lever = p - centroid[g]
         jacobian = np.hstack([np.cross(lever, normal), normal])  # d r / d (omega, v)
         weighted = weight[:, None] * jacobian
-        outer = (weighted[:, :, None] * jacobian[:, None, :]).reshape(len(rows), 36)
-        hessian = _group_sums(outer, g, n_clusters).reshape(n_clusters, 6, 6)
-        gradient = _group_sums(weighted * residual[:, None], g, n_clusters)
+        # One product sums the Hessians' lower triangles (all the eigen-solver reads),
+        # the gradients and the levers' squares.
+        sums = np.asarray(
+            indicator
+            @ np.hstack(
+                [
+                    weighted[:, _LOWER[0]] * jacobian[:, _LOWER[1]],
+                    weighted * residual[:, None],
+                    np.sum(lever**2, axis=1)[:, None],
+                ]
+            )
+        )
+        n_lower = len(_LOWER[0])
+        hessian = np.empty((n_clusters, 6, 6))
+        hessian[:, _LOWER[0], _LOWER[1]] = sums[:, :n_lower]
+        hessian[:, _LOWER[1], _LOWER[0]] = sums[:, :n_lower]
+        gradient = sums[:, n_lower : n_lower + 6]
         diagonal = np.einsum("kii->k", hessian) / 6
         active = (n_matched >= _MIN_MATCHES) & (diagonal > 0)
-        spread = np.sqrt(
-            _group_sums(np.sum(lever**2, axis=1)[:, None], g, n_clusters)[:, 0]
-            / np.maximum(n_matched, 1)
-        )
+        spread = np.sqrt(sums[:, -1] / np.maximum(n_matched, 1))
         step = np.zeros((n_clusters, 6))
         if active.any():
             step[active] = _constrained_step(hessian[active], gradient[active], spread[active])

@@ -27,6 +27,7 @@ from sklearn.utils import check_random_state
 
 from mmreg._array.grouping import group_centroids
 from mmreg._array.motion import moving_clusters
+from mmreg._array.unique_rows import unique_rows
 from mmreg.sweeps._icp import subsample_groups
 
 __all__ = ["choose_island_motions", "point_costs", "translation_starts"]
@@ -71,6 +72,7 @@ def translation_starts(
     max_displacement,
     bin_size,
     random_state=None,
+    moved=None,
 ):
     """Starting translations of every island, relative to the ego motion.
 
@@ -93,6 +95,8 @@ def translation_starts(
     bin_size : float
         Side of the histogram's bins.
     random_state : int, RandomState instance or None
+    moved : ndarray of shape (n, 3) or None
+        ``a`` moved by the ego motion, when the caller has it already.
 
     Returns
     -------
@@ -116,8 +120,8 @@ def translation_starts(
     True
     """
     rng = check_random_state(random_state)
-    rotation, translation = ego
-    moved = a @ rotation.T + translation
+    if moved is None:
+        moved = a @ ego[0].T + ego[1]
     starts = np.full((n_islands, 1 + _CENTROID_STARTS + _PEAKS, 3), np.nan)
     starts[:, 0] = 0.0
     if n_islands == 0:
@@ -148,8 +152,8 @@ def translation_starts(
     offsets = sample[target] - moved[voters][source]
     bins = np.floor(offsets / bin_size).astype(np.int64)
     # Every voter votes once per bin: a dense patch of the sweep must not outvote.
-    key = np.unique(np.column_stack([islands[voters][source], bins, source]), axis=0)
-    votes, count = np.unique(key[:, :4], axis=0, return_counts=True)
+    key = unique_rows(np.column_stack([islands[voters][source], bins, source]))
+    votes, count = unique_rows(key[:, :4], return_counts=True)
     order = np.lexsort((-count, votes[:, 0]))
     votes = votes[order]
     first = np.searchsorted(votes[:, 0], votes[:, 0], side="left")

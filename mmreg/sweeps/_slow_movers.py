@@ -45,6 +45,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mmreg._array.motion import _group_median
+from mmreg._array.unique_rows import unique_rows
 from mmreg.sweeps._icp import multi_body_icp, subsample_groups
 from mmreg.sweeps._islands import voxel_islands
 
@@ -69,20 +70,25 @@ _JOIN = 0.5
 _GROWTH_STEPS = 10
 
 
-def _spacing_ratio(points, tree, sweep):
+def _spacing_ratio(points, tree, sweep, normals=None):
     """Distance of each point to the sweep in units of the sweep's spacing there.
 
-    Also returns the index of the nearest sweep point and the spacing.
+    Also returns the index of the nearest sweep point and the spacing. ``normals``: the
+    sweep's :class:`mmreg.sweeps._icp.SurfaceNormals`, which keeps every spacing it finds
+    (these tests ask about the same sweep points again and again).
     """
     distance, nearest = tree.query(points)
-    # Many points share their nearest sweep point: its spacing is found once.
-    unique, inverse = np.unique(nearest, return_inverse=True)
-    spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
+    if normals is not None:
+        spacing = normals.spacing(nearest)
+    else:
+        # Many points share their nearest sweep point: its spacing is found once.
+        unique, inverse = np.unique(nearest, return_inverse=True)
+        spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
     spacing = np.maximum(spacing, np.finfo(float).tiny)
     return distance / spacing, nearest, spacing
 
 
-def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep):
+def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep, normals=None):
     """Whether each group's motion moves its points more than 2 spacings from the ego's.
 
     The displacement (median over the group's points) between where its own motion and
@@ -102,6 +108,8 @@ def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep):
         ``(R, t)`` of the ego motion.
     tree : cKDTree of ``sweep``
     sweep : ndarray of shape (m, 3)
+    normals : SurfaceNormals of ``sweep`` or None
+        Its spacings are kept there.
 
     Returns
     -------
@@ -109,7 +117,7 @@ def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep):
     """
     rotations, translations = motions
     moved = np.einsum("nij,nj->ni", rotations[groups], points) + translations[groups]
-    _, _, spacing = _spacing_ratio(moved, tree, sweep)
+    _, _, spacing = _spacing_ratio(moved, tree, sweep, normals)
     resting = points @ ego[0].T + ego[1]
     departure = _group_median(np.linalg.norm(moved - resting, axis=1), groups, n_groups)
     return departure > _MIN_SPACINGS * _group_median(spacing, groups, n_groups)
@@ -123,7 +131,7 @@ def _unexplained(points, tree, sweep, normals):
     spacing off its plane (a point of a surface the other sweep saw elsewhere, e.g.
     behind a moving object, lies on the plane but far from its points).
     """
-    ratio, nearest, spacing = _spacing_ratio(points, tree, sweep)
+    ratio, nearest, spacing = _spacing_ratio(points, tree, sweep, normals)
     far = np.flatnonzero(ratio > _UNEXPLAINED)
     unexplained = np.zeros(len(points), dtype=bool)
     if len(far):
@@ -148,6 +156,7 @@ def slow_movers(
     max_iter,
     tol,
     random_state,
+    moved=None,
 ):
     """Small objects that move by a few sampling spacings, found point by point.
 
@@ -175,6 +184,8 @@ def slow_movers(
     max_distance, max_iter, tol
         Of the ICP (:func:`mmreg.sweeps._icp.multi_body_icp`).
     random_state : RandomState
+    moved : ndarray of shape (n, 3) or None
+        ``a`` moved by the ego motion, when the caller has it already.
 
     Returns
     -------
@@ -213,7 +224,8 @@ def slow_movers(
     n = len(a)
     sweep, tree, normals = target
     none = (np.full(n, -1, dtype=np.intp), np.zeros((0, 3, 3)), np.zeros((0, 3)))
-    moved = a @ ego[0].T + ego[1]
+    if moved is None:
+        moved = a @ ego[0].T + ego[1]
     unexplained, _ = _unexplained(moved, tree, sweep, normals)
     candidates = np.flatnonzero(free & unexplained)
     if len(candidates) < min_size:
@@ -236,11 +248,12 @@ def slow_movers(
         max_distance=max_distance,
         max_iter=max_iter,
         tol=tol,
+        measure=False,
     )
     R, t = result.rotations, result.translations
     g = seeds[chosen]
     after = np.einsum("nij,nj->ni", R[g], a[chosen]) + t[g]
-    ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep)
+    ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep, normals)
     explained = ratio_after <= _UNEXPLAINED
     counts = np.maximum(np.bincount(g, minlength=n_seeds), 1)
     share = np.bincount(g, weights=explained, minlength=n_seeds) / counts
@@ -248,7 +261,7 @@ def slow_movers(
     seed_spacing = _group_median(spacing, g, n_seeds)
     # The second sweep's points the seed lands on, and whether the first sweep at rest
     # explains them (its spacing measured among its own points).
-    pairs = np.unique(np.column_stack([g[explained], landing[explained]]), axis=0)
+    pairs = unique_rows(np.column_stack([g[explained], landing[explained]]))
     if len(pairs):
         near, _, _ = _spacing_ratio(sweep[pairs[:, 1]], resting, resting.data)
         at_rest = np.bincount(pairs[:, 0], weights=near <= _UNEXPLAINED, minlength=n_seeds)
@@ -271,8 +284,8 @@ def _members(a, free, unexplained, seeds, accepted, R, t, target, cell, min_size
     islands, _ = voxel_islands(a, cell, 1)
     # Every island goes to the accepted seed with the most points in it.
     in_seed = np.flatnonzero(np.isin(seeds, accepted))
-    pairs, votes = np.unique(
-        np.column_stack([islands[in_seed], seeds[in_seed]]), axis=0, return_counts=True
+    pairs, votes = unique_rows(
+        np.column_stack([islands[in_seed], seeds[in_seed]]), return_counts=True
     )
     order = np.lexsort((-votes, pairs[:, 0]))
     pairs = pairs[order]
@@ -283,7 +296,7 @@ def _members(a, free, unexplained, seeds, accepted, R, t, target, cell, min_size
     k = owner[islands[rows]]
     moved = np.einsum("nij,nj->ni", R[k], a[rows]) + t[k]
     sweep, tree, normals = target
-    ratio_new, _, _ = _spacing_ratio(moved, tree, sweep)
+    ratio_new, _, _ = _spacing_ratio(moved, tree, sweep, normals)
     # The core: the points the new motion explains and the ego motion does not. Points
     # both explain (a wall the object slides along, the object's faces parallel to
     # its motion) join only where most of their nearest neighbours have joined: the
