@@ -5,7 +5,7 @@ from scipy.spatial import cKDTree
 
 __all__ = ["MAX_ABS_COORDINATE", "check_coordinate_range", "check_labels", "compact_labels"]
 __all__ += ["MAX_INCOHERENCE", "NotCorrespondencesError", "check_paired", "invalid_rows"]
-__all__ += ["split_correspondences"]
+__all__ += ["check_ego_motion", "split_correspondences"]
 
 #: Rows of correspondences pair a point with where it went, so neighbouring a-points
 #: move alike. Stacked rows whose flows ``b - a`` differ between nearest a-points by a
@@ -247,3 +247,54 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
         "use SweepRegistration (mmreg register SWEEP0 --sweep SWEEP1, or mmreg run --pairs "
         "sweeps)."
     )
+
+
+def check_ego_motion(ego_motion, d=3):
+    """``ego_motion`` as ``(R, t)`` of shapes ``(d, d)`` and ``(d,)``, from ``(R, t)`` or a
+    homogeneous ``(d + 1, d + 1)`` matrix; None stays None. One clear error otherwise.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._validation import check_ego_motion
+    >>> R, t = check_ego_motion(np.eye(4), 3)
+    >>> R.shape, t.shape
+    ((3, 3), (3,))
+    """
+    if ego_motion is None:
+        return None
+    if isinstance(ego_motion, np.ndarray) or not isinstance(ego_motion, (tuple, list)):
+        try:
+            matrix = np.asarray(ego_motion, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"ego_motion must be (R, t) or a ({d + 1}, {d + 1}) homogeneous matrix; got "
+                f"{ego_motion!r}."
+            ) from None
+        if matrix.shape != (d + 1, d + 1):
+            raise ValueError(
+                f"ego_motion must be (R, t) or a ({d + 1}, {d + 1}) homogeneous matrix; got "
+                f"an array of shape {matrix.shape}."
+            )
+        rotation, translation = matrix[:d, :d], matrix[:d, d]
+    elif len(ego_motion) != 2:
+        raise ValueError(f"ego_motion must be (R, t); got a sequence of {len(ego_motion)}.")
+    else:
+        try:
+            rotation = np.asarray(ego_motion[0], dtype=float)
+            translation = np.asarray(ego_motion[1], dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"ego_motion must be (R, t) of numbers; got {ego_motion!r}.") from None
+    if rotation.shape != (d, d) or translation.shape != (d,):
+        raise ValueError(
+            f"ego_motion must be (R, t) with R of shape ({d}, {d}) and t of shape ({d},); got "
+            f"{rotation.shape} and {translation.shape}."
+        )
+    if not (np.all(np.isfinite(rotation)) and np.all(np.isfinite(translation))):
+        raise ValueError("ego_motion holds NaN or infinite values.")
+    if not np.allclose(rotation.T @ rotation, np.eye(d), atol=1e-4) or np.linalg.det(rotation) < 0:
+        raise ValueError(
+            "ego_motion's R is not a rotation (R^T R = I and det R = 1 within 1e-4); "
+            "give the static world's motion from the first frame to the second, b = R a + t."
+        )
+    return rotation, translation

@@ -13,9 +13,10 @@ from scipy.spatial.transform import Rotation
 
 from mmreg import MultiModelRegistration
 from mmreg._array.moments import group_moments
+from mmreg._validation import check_ego_motion
 from mmreg.datasets import make_scene
 from mmreg.datasets._flying_things import make_flying_things
-from mmreg.em._static_world import check_ego_motion, widest_cluster
+from mmreg.em._static_world import widest_cluster
 from mmreg.metrics import objects_found
 
 # Small scenes: the default initial clustering asks for more clusters than they allow.

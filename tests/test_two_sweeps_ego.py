@@ -60,10 +60,10 @@ def test_a_known_ego_motion_is_the_start():
 @pytest.mark.parametrize(
     ("motion", "message"),
     [
-        ((np.eye(3), np.zeros(2)), "translation"),
-        ((2 * np.eye(3), np.zeros(3)), "rotation matrix"),
+        ((np.eye(3), np.zeros(2)), r"t of shape \(3,\)"),
+        ((2 * np.eye(3), np.zeros(3)), "not a rotation"),
         ((np.eye(3), [np.nan, 0, 0]), "NaN"),
-        ("identity", "pair"),
+        ("identity", "homogeneous matrix"),
     ],
 )
 def test_bad_ego_motions_are_refused(motion, message):

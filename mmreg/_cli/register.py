@@ -569,7 +569,7 @@ def read_ego_motion(args):
         return None
     import numpy as np
 
-    from mmreg.em._static_world import check_ego_motion
+    from mmreg._validation import check_ego_motion
     from mmreg.io._arrays import _load_npy, _load_text_table
     from mmreg.io._checks import _check_readable
 

@@ -29,7 +29,6 @@ import numpy as np
 __all__ = [
     "StaticWorldRule",
     "agrees_with_ego_motion",
-    "check_ego_motion",
     "static_world_rule",
     "widest_cluster",
 ]
@@ -125,45 +124,3 @@ def agrees_with_ego_motion(gap, min_motion):
     cluster's own scatter (:func:`~mmreg.em._steps.motion_beyond_scatter`
     read against the ego motion); below ``min_motion`` it moves with it."""
     return np.asarray(gap, dtype=float) < min_motion
-
-
-def check_ego_motion(ego_motion, d):
-    """``ego_motion`` as ``(R, t)`` of shapes ``(d, d)`` and ``(d,)``, from ``(R, t)`` or a
-    homogeneous ``(d + 1, d + 1)`` matrix; None stays None. One clear error otherwise.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from mmreg.em._static_world import check_ego_motion
-    >>> R, t = check_ego_motion(np.eye(4), 3)
-    >>> R.shape, t.shape
-    ((3, 3), (3,))
-    """
-    if ego_motion is None:
-        return None
-    if isinstance(ego_motion, np.ndarray) or not isinstance(ego_motion, (tuple, list)):
-        matrix = np.asarray(ego_motion, dtype=float)
-        if matrix.shape != (d + 1, d + 1):
-            raise ValueError(
-                f"ego_motion must be (R, t) or a ({d + 1}, {d + 1}) homogeneous matrix; got "
-                f"an array of shape {matrix.shape}."
-            )
-        rotation, translation = matrix[:d, :d], matrix[:d, d]
-    elif len(ego_motion) != 2:
-        raise ValueError(f"ego_motion must be (R, t); got a sequence of {len(ego_motion)}.")
-    else:
-        rotation = np.asarray(ego_motion[0], dtype=float)
-        translation = np.asarray(ego_motion[1], dtype=float).reshape(-1)
-    if rotation.shape != (d, d) or translation.shape != (d,):
-        raise ValueError(
-            f"ego_motion must be (R, t) with R of shape ({d}, {d}) and t of shape ({d},); got "
-            f"{rotation.shape} and {translation.shape}."
-        )
-    if not (np.all(np.isfinite(rotation)) and np.all(np.isfinite(translation))):
-        raise ValueError("ego_motion holds NaN or infinite values.")
-    if not np.allclose(rotation.T @ rotation, np.eye(d), atol=1e-4) or np.linalg.det(rotation) < 0:
-        raise ValueError(
-            "ego_motion's R is not a rotation (R^T R = I and det R = 1 within 1e-4); "
-            "give the static world's motion from the first frame to the second, b = R a + t."
-        )
-    return rotation, translation

@@ -13,7 +13,7 @@ from sklearn.utils.validation import check_is_fitted
 from mmreg._array.geometry import column_bounds, rotation_angle
 from mmreg._array.neighbors import NeighbourTable
 from mmreg._array.voxels import voxel_representatives, voxel_sample
-from mmreg._validation import check_labels, check_paired, invalid_rows
+from mmreg._validation import check_ego_motion, check_labels, check_paired, invalid_rows
 from mmreg._warnings import warn
 from mmreg.em._gate import ClusterGate
 from mmreg.em._paper import multi_model_em
@@ -26,7 +26,6 @@ from mmreg.em._robust import (
     refit_clusters,
     robust_multi_model_em,
 )
-from mmreg.em._static_world import check_ego_motion
 from mmreg.em._steps import judge_correspondences, range_noise_scale
 from mmreg.estimators._base import MIN_CORRESPONDENCES, BaseRegistration
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels, is_label_array

@@ -27,12 +27,12 @@ from mmreg._array.flow import rigid_flow
 from mmreg._array.grouping import group_bounds
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
-from mmreg._validation import check_coordinate_range, invalid_rows
+from mmreg._validation import check_coordinate_range, check_ego_motion, invalid_rows
 from mmreg.sweeps._deskew import deskew, relative_motions
 from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
 from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
 from mmreg.sweeps._ego_motion import _RESIDUAL_POINTS as _EGO_RESIDUAL_POINTS
-from mmreg.sweeps._ego_motion import _check_motion, _residual_scale, ego_motion
+from mmreg.sweeps._ego_motion import _residual_scale, ego_motion
 from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
@@ -652,7 +652,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 "ego_motion=(R, t)); with correspondences their static world holds it."
             )
         if known is not None:
-            known = _check_motion(known)
+            known = check_ego_motion(known)
         if sweep is None and (ground is not None or sweep_ground is not None):
             raise ValueError("ground and sweep_ground go with two raw sweeps: pass sweep too.")
         if sweep is None and X.shape[1] % 2 == 0:

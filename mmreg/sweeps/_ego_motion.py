@@ -26,6 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from mmreg._validation import check_ego_motion
 from mmreg.sweeps._icp import SurfaceNormals
 
 __all__ = ["ego_motion"]
@@ -92,28 +93,6 @@ def _check_length(value, name, *, allow_none=False):
     ):
         raise ValueError(f"{name} must be a positive finite length; got {value!r}.")
     return float(value)
-
-
-def _check_motion(motion):
-    """``(rotation, translation)`` as float arrays, or one clear ValueError."""
-    try:
-        rotation, translation = motion
-        rotation = np.asarray(rotation, dtype=np.float64)
-        translation = np.asarray(translation, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(
-            f"an ego motion must be a pair (rotation (3, 3), translation (3,)); got {motion!r}."
-        ) from error
-    if rotation.shape != (3, 3) or translation.shape != (3,):
-        raise ValueError(
-            "an ego motion must be a pair (rotation (3, 3), translation (3,)); got shapes "
-            f"{rotation.shape} and {translation.shape}."
-        )
-    if not (np.isfinite(rotation).all() and np.isfinite(translation).all()):
-        raise ValueError("the ego motion has NaN or infinite entries.")
-    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6) or np.linalg.det(rotation) < 0:
-        raise ValueError("the ego motion's rotation is not a rotation matrix (R^T R = I, det 1).")
-    return rotation, translation
 
 
 def _reaches(max_displacement):
@@ -336,7 +315,7 @@ def ego_motion(
     fine_points = [np.asarray(cloud.points())[:, :3] for cloud, _ in fine]
     motion = np.eye(4)
     if init is not None:
-        rotation, translation = _check_motion(init)
+        rotation, translation = check_ego_motion(init)
         # The same motion in the centred, scaled frame: t' = (R o + t - o) / s.
         motion[:3, :3] = rotation
         motion[:3, 3] = (rotation @ origin + translation - origin) / scale
