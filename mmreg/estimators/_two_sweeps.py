@@ -606,21 +606,27 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             rows(sweep_ground, keep_sweep, "sweep_ground"),
             ego_motion,
         )
-        labels = np.full(len(X), -1, dtype=self.labels_.dtype)
+        # Invalid returns: no flow (NaN), in no cluster.
+        self._restore_rows(keep, keep_sweep, np.nan)
+        return self
+
+    def _restore_rows(self, keep, keep_sweep, flow_value):
+        """The fitted per-point attributes back on every row: the rows left out (``keep``
+        False) get label -1, flow ``flow_value``, and no ground or body."""
+        labels = np.full(len(keep), -1, dtype=self.labels_.dtype)
         labels[keep] = self.labels_
-        flow = np.full((len(X), self.flow_.shape[1]), np.nan)
+        flow = np.full((len(keep), self.flow_.shape[1]), flow_value)
         flow[keep] = self.flow_
         self.labels_, self.flow_, self.outlier_mask_ = labels, flow, labels < 0
-        body = np.zeros(len(X), dtype=bool)
+        body = np.zeros(len(keep), dtype=bool)
         body[keep] = self.ego_body_mask_
         self.ego_body_mask_ = body
         if self.ground_mask_ is not None:
-            ground_mask = np.zeros(len(X), dtype=bool)
+            ground_mask = np.zeros(len(keep), dtype=bool)
             ground_mask[keep] = self.ground_mask_
             sweep_ground_mask = np.zeros(len(keep_sweep), dtype=bool)
             sweep_ground_mask[keep_sweep] = self.sweep_ground_mask_
             self.ground_mask_, self.sweep_ground_mask_ = ground_mask, sweep_ground_mask
-        return self
 
     def _fit(
         self,
@@ -781,17 +787,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             known=ego,
             find_body=False,
         )
-        labels = np.full(len(X), -1, dtype=self.labels_.dtype)
-        labels[keep] = self.labels_
-        flow = np.zeros((len(X), self.flow_.shape[1]))
-        flow[keep] = self.flow_
-        self.labels_, self.flow_, self.outlier_mask_ = labels, flow, labels < 0
-        if self.ground_mask_ is not None:
-            ground_mask = np.zeros(len(X), dtype=bool)
-            ground_mask[keep] = self.ground_mask_
-            sweep_ground_mask = np.zeros(len(sweep), dtype=bool)
-            sweep_ground_mask[keep_sweep] = self.sweep_ground_mask_
-            self.ground_mask_, self.sweep_ground_mask_ = ground_mask, sweep_ground_mask
+        self._restore_rows(keep, keep_sweep, 0.0)  # the body stays with the sensor
         self.n_ego_body_ = int(body.sum())
         self.ego_body_mask_ = body
         return self
