@@ -381,6 +381,8 @@ def robust_multi_model_em(
                     tolerance=motion_tolerance,
                     neighbours=neighbours,
                     workers=workers,
+                    targets=b,
+                    min_jump=min_motion,
                 )
                 members = np.where(members >= 0, joined[np.maximum(members, 0)], -1)
             # 5. Dissolve layers of flow that bled along another cluster's boundary.
@@ -547,6 +549,8 @@ def robust_multi_model_em(
                 tolerance=motion_tolerance,
                 neighbours=neighbours,
                 workers=workers,
+                targets=b,
+                min_jump=min_motion,
             )
             labels = np.where(labels >= 0, joined[np.maximum(labels, 0)], -1)
             became = joined[became]
