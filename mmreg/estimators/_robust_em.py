@@ -41,6 +41,7 @@ from mmreg._likelihood import morton_order, single_threaded_blas
 from mmreg._neighbors import NeighbourTable, lookup_tree
 from mmreg._relabelling import rows_moved
 from mmreg.estimators._em import EMResult, _compact_initial, _size_rank, default_sigma_floor
+from mmreg.estimators._mixed_clusters import split_mixed_clusters
 from mmreg.estimators._robust_steps import (
     _with,
     adjacent_pairs,
@@ -349,6 +350,21 @@ def robust_multi_model_em(
                 converged = True
                 break
             n_iter += 1
+            # 0. Moving clusters that hold two touching objects whose flows jump between
+            # them (an initial cluster spans up to tau, more than an object), once the
+            # static world is known and left whole.
+            if join_pieces and static >= 0:
+                labels, n_clusters = split_mixed_clusters(
+                    a,
+                    b,
+                    labels,
+                    n_clusters,
+                    sigma_floor,
+                    min_jump=min_motion,
+                    min_size=min_cluster_size,
+                    noise_scale=noise_scale,
+                    exempt=static,
+                )
             # 1. M-step on inliers. The noise's growth with range comes from the last
             # iteration's clusters; the first estimates it from the initial ones.
             inliers, models = fit(labels, n_clusters)
