@@ -14,6 +14,8 @@ and noise gives halves whose motions differ by less than ``min_motion``: neither
 """
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from mmreg.estimators._robust_steps import (
@@ -34,7 +36,7 @@ def _residuals(a, b, rotations, translations, labels):
     return b - np.einsum("nij,nj->ni", rotations[labels], a) - translations[labels]
 
 
-def _first_halves(a, b, labels, n_clusters, sigma_floor, noise_scale):
+def _residual_halves(a, b, labels, n_clusters, sigma_floor, noise_scale):
     """Each member's half (0 or 1): the sign of its residual along the main direction of
     its cluster's residuals (a mixture's residuals point two opposite ways)."""
     models = fit_clusters(a, b, labels, n_clusters, sigma_floor, noise_scale)
@@ -44,6 +46,42 @@ def _first_halves(a, b, labels, n_clusters, sigma_floor, noise_scale):
     np.add.at(scatter, labels, r[:, :, None] * r[:, None, :])
     direction = np.linalg.eigh(scatter)[1][:, :, -1]
     return (np.sum(r * direction[labels], axis=1) > 0).astype(np.intp)
+
+
+def _first_halves(a, b, labels, n_clusters, sigma_floor, noise_scale, min_jump, min_size):
+    """Each member's half (0 or 1) to start the two-means from.
+
+    Neighbours (8 nearest) of one cluster whose flows differ by at most ``min_jump`` are
+    linked; a cluster whose links fall apart into pieces, where two objects' flows jump
+    by more, starts from its largest piece against the rest: the objects' own regions,
+    from which the two-means on rigid fits settles on them. (A least-squares motion of
+    two objects turns to explain part of their difference, so the signs of its residuals
+    cut both objects.) Other clusters start from :func:`_residual_halves`.
+    """
+    half = _residual_halves(a, b, labels, n_clusters, sigma_floor, noise_scale)
+    n = len(a)
+    k = min(9, n)
+    index = cKDTree(a).query(a, k=k)[1][:, 1:]
+    source = np.repeat(np.arange(n), k - 1)
+    target = index.ravel()
+    flow = b - a
+    linked = (labels[source] == labels[target]) & (
+        np.linalg.norm(flow[source] - flow[target], axis=1) <= min_jump
+    )
+    graph = coo_matrix(
+        (np.ones(np.count_nonzero(linked)), (source[linked], target[linked])), shape=(n, n)
+    )
+    _, piece = connected_components(graph, directed=False)
+    # Each cluster's largest piece.
+    sizes = np.bincount(piece)
+    largest = np.full(n_clusters, -1)
+    order = np.argsort(sizes[piece], kind="stable")
+    largest[labels[order]] = piece[order]  # the last write per cluster is its largest
+    in_largest = piece == largest[labels]
+    rest = np.bincount(labels[~in_largest], minlength=n_clusters)
+    held = np.bincount(labels[in_largest], minlength=n_clusters)
+    apart = (rest >= min_size) & (held >= min_size)
+    return np.where(apart[labels], (~in_largest).astype(np.intp), half)
 
 
 def split_mixed_clusters(
@@ -79,7 +117,7 @@ def split_mixed_clusters(
         return labels, n_clusters
     pa, pb, own = a[rows], b[rows], labels[rows]
     scale = None if noise_scale is None else noise_scale[rows]
-    half = _first_halves(pa, pb, own, n_clusters, sigma_floor, scale)
+    half = _first_halves(pa, pb, own, n_clusters, sigma_floor, scale, min_jump, min_size)
     for _ in range(_ROUNDS):
         models = fit_clusters(pa, pb, 2 * own + half, 2 * n_clusters, sigma_floor, scale)
         first = _residuals(pa, pb, models.rotations, models.translations, 2 * own)
