@@ -236,7 +236,9 @@ def robust_multi_model_em(
         static world is part of it.
     motion_tolerance : float, default=0.2
         Touching moving clusters whose motions agree within this fraction of their motion
-        are one object (:func:`join_moving_pieces`).
+        are one object (:func:`join_moving_pieces`), unless their flows jump by more than
+        ``min_motion`` where they touch; a moving cluster that holds two such objects is
+        split (:func:`~mmreg.estimators._mixed_clusters.split_mixed_clusters`).
     tol : float, default=1e-3
         Converged when an iteration moves at most this fraction of the correspondences
         to another reported cluster (:func:`~mmreg._relabelling.rows_moved`: the
