@@ -20,6 +20,8 @@ from scipy.spatial import cKDTree
 
 from mmreg.estimators._robust_steps import (
     _flow_jumps_at_contact,
+    _motion_from,
+    _rms,
     fit_clusters,
     motion_gap,
 )
@@ -27,7 +29,7 @@ from mmreg.estimators._robust_steps import (
 __all__ = ["split_mixed_clusters"]
 
 # Rounds of the two-means on rigid fits (fit each half, give each member to the half
-# whose motion explains it better); a mixture of two rigid motions settles in one or two.
+# whose motion explains it better); from the objects' own regions it settles in one or two.
 _ROUNDS = 4
 
 
@@ -37,8 +39,8 @@ def _residuals(a, b, rotations, translations, labels):
 
 
 def _residual_halves(a, b, labels, n_clusters, sigma_floor, noise_scale):
-    """Each member's half (0 or 1): the sign of its residual along the main direction of
-    its cluster's residuals (a mixture's residuals point two opposite ways)."""
+    """Each row's half (0 or 1): the sign of its residual along the main direction of its
+    cluster's residuals (a mixture's residuals point two opposite ways)."""
     models = fit_clusters(a, b, labels, n_clusters, sigma_floor, noise_scale)
     r = _residuals(a, b, models.rotations, models.translations, labels)
     d = a.shape[1]
@@ -48,17 +50,36 @@ def _residual_halves(a, b, labels, n_clusters, sigma_floor, noise_scale):
     return (np.sum(r * direction[labels], axis=1) > 0).astype(np.intp)
 
 
-def _first_halves(a, b, labels, n_clusters, sigma_floor, noise_scale, min_jump, min_size):
-    """Each member's half (0 or 1) to start the two-means from.
+def _two_means(a, b, labels, n_clusters, half, sigma_floor, noise_scale):
+    """Two-means on rigid fits from ``half``: fit each half, give each row to the half
+    whose motion explains it better. Returns the halves, their models (cluster ``j``'s
+    halves are ``2j`` and ``2j + 1``) and each cluster's summed squared residuals."""
+    for _ in range(_ROUNDS):
+        models = fit_clusters(a, b, 2 * labels + half, 2 * n_clusters, sigma_floor, noise_scale)
+        first = _residuals(a, b, models.rotations, models.translations, 2 * labels)
+        second = _residuals(a, b, models.rotations, models.translations, 2 * labels + 1)
+        nearer = (np.sum(second**2, axis=1) < np.sum(first**2, axis=1)).astype(np.intp)
+        if np.array_equal(nearer, half):
+            break
+        half = nearer
+    models = fit_clusters(a, b, 2 * labels + half, 2 * n_clusters, sigma_floor, noise_scale)
+    rss = models.squared_error.reshape(-1, 2).sum(axis=1)
+    return half, models, rss
+
+
+def _pieces_apart(a, b, labels, n_clusters, min_jump, min_size):
+    """Each row's half (0: its cluster's largest piece, 1: the rest), and whether each
+    cluster falls apart.
 
     Neighbours (8 nearest) of one cluster whose flows differ by at most ``min_jump`` are
-    linked; a cluster whose links fall apart into pieces, where two objects' flows jump
-    by more, starts from its largest piece against the rest: the objects' own regions,
-    from which the two-means on rigid fits settles on them. (A least-squares motion of
-    two objects turns to explain part of their difference, so the signs of its residuals
-    cut both objects.) Other clusters start from :func:`_residual_halves`.
+    linked. A cluster whose links fall apart into its largest piece and at least
+    ``min_size`` other rows (two objects' flows jump by more than ``min_jump`` where they
+    touch) starts the two-means from those: the objects' own regions. (A least-squares
+    motion of two objects turns to explain part of their difference, and the signs of
+    its residuals cut both objects; where one object turns about an axis through the
+    contact, the links hold there and the signs of the residuals are the better start.)
+    A flow that bends across one object stays linked.
     """
-    half = _residual_halves(a, b, labels, n_clusters, sigma_floor, noise_scale)
     n = len(a)
     k = min(9, n)
     index = cKDTree(a).query(a, k=k)[1][:, 1:]
@@ -72,20 +93,26 @@ def _first_halves(a, b, labels, n_clusters, sigma_floor, noise_scale, min_jump, 
         (np.ones(np.count_nonzero(linked)), (source[linked], target[linked])), shape=(n, n)
     )
     _, piece = connected_components(graph, directed=False)
-    # Each cluster's largest piece.
     sizes = np.bincount(piece)
     largest = np.full(n_clusters, -1)
     order = np.argsort(sizes[piece], kind="stable")
     largest[labels[order]] = piece[order]  # the last write per cluster is its largest
-    in_largest = piece == largest[labels]
-    rest = np.bincount(labels[~in_largest], minlength=n_clusters)
-    held = np.bincount(labels[in_largest], minlength=n_clusters)
-    apart = (rest >= min_size) & (held >= min_size)
-    return np.where(apart[labels], (~in_largest).astype(np.intp), half)
+    half = (piece != largest[labels]).astype(np.intp)
+    counts = np.bincount(2 * labels + half, minlength=2 * n_clusters).reshape(-1, 2)
+    return half, counts.min(axis=1) >= min_size
 
 
 def split_mixed_clusters(
-    a, b, labels, n_clusters, sigma_floor, *, min_jump, min_size=4, noise_scale=None, exempt=-1
+    a,
+    b,
+    labels,
+    n_clusters,
+    sigma_floor,
+    *,
+    min_jump,
+    min_size=4,
+    noise_scale=None,
+    reference=None,
 ):
     """Split each cluster whose two best rigid halves' flows jump where they touch.
 
@@ -103,8 +130,10 @@ def split_mixed_clusters(
         Each half keeps at least this many members.
     noise_scale : ndarray of shape (n,) or None
         Each row's noise scale, for the fits.
-    exempt : int, default=-1
-        A cluster never split (the static world), -1 for none.
+    reference : tuple of ndarray or None
+        The static world's motion ``(R, t)``: only clusters that move ``min_jump``
+        beyond their scatter relative to it are split (not the static world nor its
+        slow pieces). None: every cluster may be.
 
     Returns
     -------
@@ -113,25 +142,32 @@ def split_mixed_clusters(
     n_clusters : int
     """
     rows = np.flatnonzero(labels >= 0)
-    if n_clusters == 0 or len(rows) < 2 * min_size:
+    if reference is not None and len(rows):
+        # Only moving clusters: neither the static world nor its slow pieces.
+        scale = None if noise_scale is None else noise_scale[rows]
+        models = fit_clusters(a[rows], b[rows], labels[rows], n_clusters, sigma_floor, scale)
+        beyond = _motion_from(models, reference) - _rms(models.squared_error, models.moments)
+        rows = rows[beyond[labels[rows]] >= min_jump]
+    if len(rows) < 2 * min_size:
         return labels, n_clusters
-    pa, pb, own = a[rows], b[rows], labels[rows]
+    clusters, own = np.unique(labels[rows], return_inverse=True)
+    m = len(clusters)
+    pa, pb = a[rows], b[rows]
     scale = None if noise_scale is None else noise_scale[rows]
-    half = _first_halves(pa, pb, own, n_clusters, sigma_floor, scale, min_jump, min_size)
-    for _ in range(_ROUNDS):
-        models = fit_clusters(pa, pb, 2 * own + half, 2 * n_clusters, sigma_floor, scale)
-        first = _residuals(pa, pb, models.rotations, models.translations, 2 * own)
-        second = _residuals(pa, pb, models.rotations, models.translations, 2 * own + 1)
-        nearer = (np.sum(second**2, axis=1) < np.sum(first**2, axis=1)).astype(np.intp)
-        if np.array_equal(nearer, half):
-            break
-        half = nearer
-    models = fit_clusters(pa, pb, 2 * own + half, 2 * n_clusters, sigma_floor, scale)
-    sizes = np.bincount(2 * own + half, minlength=2 * n_clusters).reshape(-1, 2)
+    # Two starts, the better kept: the pieces the flow falls apart into, and the signs
+    # of the residuals.
+    pieces, apart = _pieces_apart(pa, pb, own, m, min_jump, min_size)
+    signs = _residual_halves(pa, pb, own, m, sigma_floor, scale)
+    half, models, rss = _two_means(pa, pb, own, m, signs, sigma_floor, scale)
+    if apart.any():
+        other, other_models, other_rss = _two_means(pa, pb, own, m, pieces, sigma_floor, scale)
+        better = other_rss < rss
+        half = np.where(better[own], other, half)
+        pick = np.repeat(better, 2)
+        models = models.take(np.arange(2 * m))
+        models.put(np.flatnonzero(pick), other_models.take(np.flatnonzero(pick)))
+    sizes = np.bincount(2 * own + half, minlength=2 * m).reshape(-1, 2)
     candidates = np.flatnonzero(sizes.min(axis=1) >= min_size)
-    candidates = candidates[candidates != exempt]
-    if not len(candidates):
-        return labels, n_clusters
     # Motions that differ by less than min_jump anywhere cannot jump by more at the contact.
     gap = np.maximum(
         motion_gap(models, 2 * candidates, 2 * candidates + 1),

@@ -355,7 +355,7 @@ def robust_multi_model_em(
             # 0. Moving clusters that hold two touching objects whose flows jump between
             # them (an initial cluster spans up to tau, more than an object), once the
             # static world is known and left whole.
-            if join_pieces and static >= 0:
+            if join_pieces and reference is not None:
                 labels, n_clusters = split_mixed_clusters(
                     a,
                     b,
@@ -365,7 +365,7 @@ def robust_multi_model_em(
                     min_jump=min_motion,
                     min_size=min_cluster_size,
                     noise_scale=noise_scale,
-                    exempt=static,
+                    reference=reference,
                 )
             # 1. M-step on inliers. The noise's growth with range comes from the last
             # iteration's clusters; the first estimates it from the initial ones.
