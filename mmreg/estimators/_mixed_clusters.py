@@ -67,7 +67,25 @@ def _two_means(a, b, labels, n_clusters, half, sigma_floor, noise_scale):
     return half, models, rss
 
 
-def _pieces_apart(a, b, labels, n_clusters, min_jump, min_size):
+def _neighbours(a, k=8):
+    """Each row's ``k`` nearest other rows (fewer if there are fewer)."""
+    k = min(k + 1, len(a))
+    return cKDTree(a).query(a, k=k)[1][:, 1:]
+
+
+def _smoothed(half, labels, index, rounds=3):
+    """Each row takes the half most of its neighbours of its own cluster are in (its own
+    on a tie), ``rounds`` times. Two objects' halves are regions and stay as they are;
+    halves that a noisy flow's residuals drew (every row nearer the motion of its own
+    half, interleaved) become regions of one motion, whose fits then agree."""
+    same = labels[index] == labels[:, None]
+    for _ in range(rounds):
+        votes = np.sum(same * (2 * half[index] - 1), axis=1)
+        half = np.where(votes > 0, 1, np.where(votes < 0, 0, half))
+    return half
+
+
+def _pieces_apart(a, b, labels, n_clusters, min_jump, min_size, index):
     """Each row's half (0: its cluster's largest piece, 1: the rest), and whether each
     cluster falls apart.
 
@@ -81,9 +99,7 @@ def _pieces_apart(a, b, labels, n_clusters, min_jump, min_size):
     A flow that bends across one object stays linked.
     """
     n = len(a)
-    k = min(9, n)
-    index = cKDTree(a).query(a, k=k)[1][:, 1:]
-    source = np.repeat(np.arange(n), k - 1)
+    source = np.repeat(np.arange(n), index.shape[1])
     target = index.ravel()
     flow = b - a
     linked = (labels[source] == labels[target]) & (
@@ -156,7 +172,8 @@ def split_mixed_clusters(
     scale = None if noise_scale is None else noise_scale[rows]
     # Two starts, the better kept: the pieces the flow falls apart into, and the signs
     # of the residuals.
-    pieces, apart = _pieces_apart(pa, pb, own, m, min_jump, min_size)
+    index = _neighbours(pa)
+    pieces, apart = _pieces_apart(pa, pb, own, m, min_jump, min_size, index)
     signs = _residual_halves(pa, pb, own, m, sigma_floor, scale)
     half, models, rss = _two_means(pa, pb, own, m, signs, sigma_floor, scale)
     if apart.any():
@@ -166,6 +183,10 @@ def split_mixed_clusters(
         pick = np.repeat(better, 2)
         models = models.take(np.arange(2 * m))
         models.put(np.flatnonzero(pick), other_models.take(np.flatnonzero(pick)))
+    # The contact test below reads halves that are regions: two-means halves are
+    # drawn by the residuals, each row nearer its own half's motion by construction.
+    half = _smoothed(half, own, index)
+    models = fit_clusters(pa, pb, 2 * own + half, 2 * m, sigma_floor, scale)
     sizes = np.bincount(2 * own + half, minlength=2 * m).reshape(-1, 2)
     candidates = np.flatnonzero(sizes.min(axis=1) >= min_size)
     # Motions that differ by less than min_jump anywhere cannot jump by more at the contact.
@@ -189,6 +210,22 @@ def split_mixed_clusters(
             3.0 * float(np.median(spacing)),
             min_jump=min_jump,
         )[0]:
-            labels[rows[mine & (half == 1)]] = next_label
+            # Each row to the half whose motion explains it better.
+            first = _residuals(
+                pa[mine],
+                pb[mine],
+                models.rotations,
+                models.translations,
+                np.full(np.count_nonzero(mine), 2 * cluster),
+            )
+            second = _residuals(
+                pa[mine],
+                pb[mine],
+                models.rotations,
+                models.translations,
+                np.full(np.count_nonzero(mine), 2 * cluster + 1),
+            )
+            nearer = np.sum(second**2, axis=1) < np.sum(first**2, axis=1)
+            labels[rows[mine][nearer]] = next_label
             next_label += 1
     return labels, next_label
