@@ -5,12 +5,14 @@ to ``tau``) may hold two touching objects that move alike: two boxes on one pall
 slipping 10 cm as both move 1 m. Fitted as one, its motion lies between theirs, and a
 noise scale of its own (``variant="sweep"``) keeps both objects' points: nothing is left
 unexplained for the proposals to find either object in. The step below tries, in each
-cluster, the two-motion split that a two-means on the rigid fits gives, and keeps it when
-the two halves' flows jump at their contact by more than ``min_motion``
-(:func:`~mmreg.estimators._robust_steps._flow_jumps_at_contact`, the test that keeps
-:func:`~mmreg.estimators._robust_steps.join_moving_pieces` from joining them again). A
-network's flow that bends across one object meets itself at the contact of the halves,
-and noise gives halves whose motions differ by less than ``min_motion``: neither splits.
+moving cluster, the two-motion split of a two-means on rigid fits (from the pieces that
+neighbours' flows fall apart into, or from the signs of the residuals), smooths the
+halves into regions, and keeps the split when the halves' flows jump at their contact by
+more than ``min_motion`` (:func:`~mmreg.estimators._robust_steps._flow_jumps_at_contact`,
+the test that keeps :func:`~mmreg.estimators._robust_steps.join_moving_pieces` from
+joining them again). A network's flow that bends across one object meets itself at the
+contact of the halves, and noise gives halves whose motions differ by less than
+``min_motion``: neither splits.
 """
 
 import numpy as np
