@@ -12,6 +12,7 @@ elk) turned 5 degrees apart are still one cluster (IoU 0.75).
 
 import numpy as np
 import pytest
+from _surfaces import area_weighted_box
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -35,6 +36,13 @@ def _floor_and_wall(rng, n, z):
     return np.vstack([floor, wall])
 
 
+def _touching_boxes(rng):
+    """Two 2 x 0.8 x 0.6 m boxes side by side, touching along a long face."""
+    one = area_weighted_box([0.0, 0.0, 0.0], [2.0, 0.8, 0.6], 2000, rng)
+    two = area_weighted_box([0.0, 0.8, 0.0], [2.0, 0.8, 0.6], 2000, rng)
+    return one, two
+
+
 def _touching_meshes(first, second, rng):
     """Two meshes of diameter 1 m, the second pushed against the first along x until a
     tenth of its points lie within 5 cm of the first's."""
@@ -55,7 +63,10 @@ def _scene(first, second, difference, seed=0):
     """Labels 0, 1: the objects, 2: the static floor and wall. Both objects move 1 m and
     turn 3 degrees about the vertical; object 1 also moves 10 cm or turns 5 degrees."""
     rng = np.random.default_rng(seed)
-    one, two = _touching_meshes(first, second, rng)
+    if first == "box":
+        one, two = _touching_boxes(rng)
+    else:
+        one, two = _touching_meshes(first, second, rng)
     centre = np.vstack([one, two]).mean(axis=0)
 
     def common(points):
@@ -73,7 +84,7 @@ def _scene(first, second, difference, seed=0):
 
 
 @pytest.mark.parametrize("difference", ["10 cm", "5 degrees"])
-@pytest.mark.parametrize("meshes", [("bunny", "bunny"), ("pig", "bull")])
+@pytest.mark.parametrize("meshes", [("bunny", "bunny"), ("pig", "bull"), ("box", "box")])
 def test_touching_objects_moving_alike_are_two_clusters(meshes, difference):
     X, truth = _scene(*meshes, difference)
     est = MultiModelRegistration(random_state=0).fit(X)

@@ -6,7 +6,8 @@ slipping 10 cm as both move 1 m. Fitted as one, its motion lies between theirs, 
 noise scale of its own (``variant="sweep"``) keeps both objects' points: nothing is left
 unexplained for the proposals to find either object in. The step below tries, in each
 moving cluster, the two-motion split of a two-means on rigid fits (from the pieces that
-neighbours' flows fall apart into, or from the signs of the residuals), smooths the
+neighbours' flows fall apart into, the motions at the cluster's two ends, or the signs of
+the residuals; the one of least squared residuals), smooths the
 halves into regions, and keeps the split when the halves' flows jump at their contact by
 more than ``min_motion`` (:func:`~mmreg.estimators._robust_steps._flow_jumps_at_contact`,
 the test that keeps :func:`~mmreg.estimators._robust_steps.join_moving_pieces` from
@@ -50,6 +51,37 @@ def _residual_halves(a, b, labels, n_clusters, sigma_floor, noise_scale):
     np.add.at(scatter, labels, r[:, :, None] * r[:, None, :])
     direction = np.linalg.eigh(scatter)[1][:, :, -1]
     return (np.sum(r * direction[labels], axis=1) > 0).astype(np.intp)
+
+
+def _end_halves(a, b, labels, n_clusters, sigma_floor, k=32):
+    """Each row's half (0 or 1): which of the motions fitted at the two ends of its
+    cluster (the ``k`` rows nearest each extreme along its longest axis) explains it
+    better. Two objects side by side each hold one end."""
+    half = np.zeros(len(a), dtype=np.intp)
+    for cluster in range(n_clusters):
+        rows = np.flatnonzero(labels == cluster)
+        near = min(k, len(rows) // 4)
+        if near < 4:
+            continue
+        points = a[rows]
+        centred = points - points.mean(axis=0)
+        along = centred @ np.linalg.svd(centred, full_matrices=False)[2][0]
+        tree = cKDTree(points)
+        ends = np.concatenate(
+            [
+                tree.query(points[np.argmin(along)], k=near)[1],
+                tree.query(points[np.argmax(along)], k=near)[1],
+            ]
+        )
+        models = fit_clusters(points[ends], b[rows][ends], np.repeat([0, 1], near), 2, sigma_floor)
+        first, second = (
+            _residuals(
+                points, b[rows], models.rotations, models.translations, np.full(len(rows), j)
+            )
+            for j in (0, 1)
+        )
+        half[rows] = np.sum(second**2, axis=1) < np.sum(first**2, axis=1)
+    return half
 
 
 def _two_means(a, b, labels, n_clusters, half, sigma_floor, noise_scale):
@@ -172,16 +204,19 @@ def split_mixed_clusters(
     m = len(clusters)
     pa, pb = a[rows], b[rows]
     scale = None if noise_scale is None else noise_scale[rows]
-    # Two starts, the better kept: the pieces the flow falls apart into, and the signs
-    # of the residuals.
+    # Three starts, the best kept: the signs of the residuals, the motions at the
+    # cluster's two ends, and the pieces the flow falls apart into.
     index = _neighbours(pa)
     pieces, apart = _pieces_apart(pa, pb, own, m, min_jump, min_size, index)
     signs = _residual_halves(pa, pb, own, m, sigma_floor, scale)
+    ends = _end_halves(pa, pb, own, m, sigma_floor)
     half, models, rss = _two_means(pa, pb, own, m, signs, sigma_floor, scale)
-    if apart.any():
-        other, other_models, other_rss = _two_means(pa, pb, own, m, pieces, sigma_floor, scale)
+    starts = [ends, pieces] if apart.any() else [ends]
+    for start in starts:
+        other, other_models, other_rss = _two_means(pa, pb, own, m, start, sigma_floor, scale)
         better = other_rss < rss
         half = np.where(better[own], other, half)
+        rss = np.where(better, other_rss, rss)
         pick = np.repeat(better, 2)
         models = models.take(np.arange(2 * m))
         models.put(np.flatnonzero(pick), other_models.take(np.flatnonzero(pick)))
