@@ -2,11 +2,11 @@
 
 Two real meshes (1 m across, in contact) or two boxes sharing a long face, carried 1 m by
 one motion, one of them also moved 10 cm or turned 5 degrees, on a static floor and wall.
-The sweep variant joined them: an initial cluster spans up to ``tau`` and held both, its own noise scale kept
-both objects' points, and ``join_moving_pieces`` joined the two again whenever they were
-apart (their motions agree within ``motion_tolerance`` = 20 % of 1 m). A flow that bends
-across one object (a network's error) is still joined: it meets itself where the pieces
-touch, two objects' flows jump there.
+The sweep variant joined them: an initial cluster spans up to ``tau`` and held both, its
+own noise scale kept both objects' points, and ``join_moving_pieces`` joined the two
+again whenever they were apart (their motions agree within ``motion_tolerance`` = 20 %
+of 1 m). A flow that bends across one object (a network's error) is still joined: it
+meets itself where the pieces touch, two objects' flows jump there.
 """
 
 import numpy as np
