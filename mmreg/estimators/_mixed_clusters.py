@@ -231,9 +231,14 @@ def split_mixed_clusters(
         motion_gap(models, 2 * candidates, 2 * candidates + 1),
         motion_gap(models, 2 * candidates + 1, 2 * candidates),
     )
+    # Each half a rigid motion of its own: its rows nearer its motion (RMS) than halfway
+    # to the other's. Halves of one noisy object, or a patch of coherently wrong flow
+    # (errors as large as their offset) cut from its object, are not.
+    scatter = _rms(models.squared_error, models.moments).reshape(-1, 2)[candidates].max(axis=1)
+    rigid = scatter < 0.5 * gap
     labels = labels.copy()
     next_label = n_clusters
-    for cluster in candidates[gap > min_jump]:
+    for cluster in candidates[(gap > min_jump) & rigid]:
         mine = own == cluster
         points = pa[mine]
         spacing = cKDTree(points).query(points, k=2)[0][:, 1]
