@@ -3,7 +3,7 @@
 Without --data the scenes are GENERATED, not the real data sets:
 mmreg.datasets.make_flying_things (about 10 objects 2-4 m across, FlyingThings3D's
 camera, 32,768 correspondences) and mmreg.datasets.make_street (a KITTI-like street,
-parked and moving cars, 16,384 correspondences), both with the scene-flow errors of a
+parked and moving cars, 32,768 correspondences as in the paper), both with the errors of a
 learned network (noise growing with depth, bleeding across object boundaries, 10 % gross
 errors) and SAM-like masks. --data PATH reads real frames instead, through
 mmreg.datasets.load_flying_things / load_kitti_scene_flow (frames 0, 1, ...; 32,768
@@ -58,7 +58,7 @@ PANEL_COLUMNS = [
     "runtime_s",
 ]
 # Generated scenes: correspondences and the image size (None: the data set's own).
-SIZES = {"flying_things": (32768, None), "kitti": (16384, None)}
+SIZES = {"flying_things": (32768, None), "kitti": (32768, None)}
 QUICK_SIZES = {"flying_things": (2048, (135, 240)), "kitti": (2048, (94, 310))}
 QUICK_RUNS = 1
 REAL_POINTS = 32768

@@ -2,7 +2,7 @@
 
 Scenes at the paper's scale: Table I, Exp. 2 (GENERATED PASCAL3D+-like, 22,395
 correspondences, 7 objects), and GENERATED FlyingThings3D-like (32,768) and KITTI-like
-(16,384) scenes; every method with that experiment's parameters (see table1.py and
+(32,768) scenes; every method with that experiment's parameters (see table1.py and
 figure2.py). Each fit is timed alone, one after the other in this process (no parallel
 runs, no cache), given the initial clusters; the initial clustering is timed on its own.
 The paper's statements are about PASCAL3D+ (Section V-C, Python on an M1 Pro): SRANSAC

@@ -4,6 +4,9 @@ The loop is the paper's (fit every cluster, drop the small ones, reassign each
 correspondence to its most likely cluster within the gate); the named steps of
 :mod:`mmreg.em._steps` sit between its lines:
 
+0. in the sweep variant, once the static world is known, a moving cluster that holds two
+   touching objects whose flows jump between them split in two
+   (:func:`~mmreg.em._mixed_clusters.split_mixed_clusters`, ``"moving_pieces"``);
 1. M-step on inliers (:func:`trimmed_fit`) instead of Horn on every member, each
    cluster with a robust noise scale of its own (``"trimming"``; the first iteration
    also estimates the noise's growth with range, ``"range_noise"``);
@@ -56,6 +59,7 @@ from mmreg._array.neighbors import NeighbourTable, lookup_tree
 from mmreg._array.relabelling import rows_moved
 from mmreg.em._gate import ClusterGate
 from mmreg.em._likelihood import morton_order, single_threaded_blas
+from mmreg.em._mixed_clusters import split_mixed_clusters
 from mmreg.em._paper import EMResult, _compact_initial, _size_rank, default_sigma_floor
 from mmreg.em._static_world import StaticWorldRule, static_world_rule
 from mmreg.em._steps import (
@@ -254,7 +258,9 @@ def robust_multi_model_em(
         static world is part of it.
     motion_tolerance : float, default=0.2
         Touching moving clusters whose motions agree within this fraction of their motion
-        are one object (:func:`join_moving_pieces`).
+        are one object (:func:`join_moving_pieces`), unless their flows jump by more than
+        ``min_motion`` where they touch; a moving cluster that holds two such objects is
+        split (:func:`~mmreg.em._mixed_clusters.split_mixed_clusters`).
     tol : float, default=1e-3
         Converged when an iteration moves at most this fraction of the correspondences
         to another reported cluster (:func:`~mmreg._array.relabelling.rows_moved`: the
@@ -317,6 +323,7 @@ def robust_multi_model_em(
                 state.converged = True  # nothing left to fit, merge or assign to
                 break
             state.start_iteration()
+            _split_mixed_clusters(setting, state)  # 0. (moving_pieces)
             _m_step(setting, state)  # 1. (trimming)
             if state.n_iter == 1:
                 _first_estimates(setting, state)  # (range_noise)
@@ -607,6 +614,26 @@ def _static_world(setting, state):
     state.members = _through(state.root, state.labels)
 
 
+def _split_mixed_clusters(setting, state):
+    """0. A moving cluster that holds two touching objects whose flows jump between them
+    split in two (``moving_pieces``, sweep variant): an initial cluster spans up to tau,
+    more than an object. Only once the static world is known, and never the static world.
+    """
+    if setting.motion_tolerance is None or state.reference is None:
+        return
+    state.labels, state.n_clusters = split_mixed_clusters(
+        setting.a,
+        setting.b,
+        state.labels,
+        state.n_clusters,
+        setting.sigma_floor,
+        min_jump=setting.min_motion,
+        min_size=setting.min_cluster_size,
+        noise_scale=state.noise_scale,
+        reference=state.reference,
+    )
+
+
 def _join_moving_pieces(setting, state):
     """4. Touching pieces of one moving object whose flow bends with the motion joined
     (``moving_pieces``, sweep variant)."""
@@ -622,6 +649,8 @@ def _join_moving_pieces(setting, state):
         tolerance=setting.motion_tolerance,
         neighbours=setting.neighbours,
         workers=setting.workers,
+        targets=setting.b,
+        min_jump=setting.min_motion,
     )
     state.members = _through(joined, state.members)
     state.root = joined[state.root]

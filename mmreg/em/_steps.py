@@ -745,7 +745,18 @@ def motion_size(models, clusters, static):
 
 
 def join_moving_pieces(
-    points, labels, models, static, d, sigma_floor, *, tolerance=0.2, neighbours=None, workers=1
+    points,
+    labels,
+    models,
+    static,
+    d,
+    sigma_floor,
+    *,
+    tolerance=0.2,
+    neighbours=None,
+    workers=1,
+    targets=None,
+    min_jump=0.0,
 ):
     """Merge touching moving clusters whose motions agree within ``tolerance`` of the motion.
 
@@ -758,7 +769,15 @@ def join_moving_pieces(
     other's points, RMS, within ``tolerance`` times the smaller of their motions
     relative to the static world (to standing still when there is none: a camera's
     background split in pieces moves alike too). Cars in one lane move alike too, but
-    do not touch.
+    do not touch. Two objects that touch and move alike within ``tolerance`` (two boxes
+    on one pallet, one slipping 10 cm as both move 1 m) are told apart by ``targets``,
+    the b-points: a network's error bends the flow of one object continuously, so the
+    flows meet where its pieces touch, while two objects' flows jump there by the
+    difference of their motions (:func:`_flow_jumps_at_contact`); pieces whose flows
+    jump there by more than ``min_jump`` (``min_motion``: motions closer than this are
+    one motion, as the static world's slow pieces are; FlyingThings3D's objects are
+    rigid to a few millimetres) are never joined. Without ``targets`` the contact is
+    not looked at.
     ``neighbours``: a :class:`NeighbourTable` of ``points``, which saves the query of
     the spacings.
 
@@ -788,10 +807,16 @@ def join_moving_pieces(
         moving = np.zeros(len(points), dtype=bool)
         moving[rows] = True
         spacing = neighbours.nearest_among(rows, moving)
-    pairs = touching_groups(pts, own, 3.0 * float(np.median(spacing)))
+    radius = 3.0 * float(np.median(spacing))
+    pairs = touching_groups(pts, own, radius)
     if not len(pairs):
         return root, models, 0
     pairs = pairs[_motions_agree(models, pairs[:, 0], pairs[:, 1], static, tolerance)]
+    if len(pairs) and targets is not None:
+        jumps = _flow_jumps_at_contact(
+            pts, targets[rows], own, models, pairs, radius, min_jump=min_jump
+        )
+        pairs = pairs[~jumps]
     if not len(pairs):
         return root, models, 0
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(k, k))
@@ -803,6 +828,49 @@ def join_moving_pieces(
     for target in np.unique(root[root != np.arange(k)]):
         _merge_into(models, target, np.flatnonzero(root == target), d, sigma_floor)
     return root, models, int(np.count_nonzero(root != np.arange(k)))
+
+
+def _flow_jumps_at_contact(points, targets, labels, models, pairs, radius, *, min_jump=0.0):
+    """Whether the flow jumps where the clusters of each pair ``(i, j)`` touch.
+
+    Two hypotheses about a touching pair whose motions differ by a gap ``g`` (where one
+    motion carries a point, less where the other carries it): two objects, whose flows
+    jump by ``g`` at the contact, so that each side's contact points sit on their own
+    motion; or one object whose flow bends continuously (a network's error), cut in two
+    by rigid fits, so that the flows meet at the contact, halfway between the two
+    motions. For every contact point (within ``radius`` of the other cluster) the
+    position of its b-point along ``g`` is ``s = (b - own(a)) . g / |g|^2``: 0 on its own
+    motion, 1/2 halfway. The flow jumps when the median ``s`` of the pair's contact
+    points on both sides is nearer 0 than 1/2, and the median ``|g|`` there exceeds
+    ``min_jump``. The median keeps wrong correspondences (up to half of the contact)
+    from deciding, and noise moves ``s`` symmetrically about its mean.
+    """
+    jumps = np.zeros(len(pairs), dtype=bool)
+    trees = {}
+
+    def tree_of(cluster):
+        if cluster not in trees:
+            trees[cluster] = cKDTree(points[labels == cluster])
+        return trees[cluster]
+
+    for index, (i, j) in enumerate(pairs):
+        positions, sizes = [], []
+        for own, other in ((i, j), (j, i)):
+            mine = np.flatnonzero(labels == own)
+            dist, _ = tree_of(other).query(points[mine], distance_upper_bound=radius)
+            contact = mine[np.isfinite(dist)]
+            a, b = points[contact], targets[contact]
+            here = a @ models.rotations[own].T + models.translations[own]
+            gap = a @ models.rotations[other].T + models.translations[other] - here
+            size2 = np.sum(gap * gap, axis=1)
+            valid = size2 > 0
+            positions.append(np.sum((b - here) * gap, axis=1)[valid] / size2[valid])
+            sizes.append(np.sqrt(size2[valid]))
+        positions, sizes = np.concatenate(positions), np.concatenate(sizes)
+        jumps[index] = (
+            len(positions) > 0 and np.median(positions) < 0.25 and np.median(sizes) > min_jump
+        )
+    return jumps
 
 
 # Above this many pairs of moving clusters, join_moving_pieces tests only touching ones.

@@ -203,7 +203,11 @@ class MultiModelRegistration(BaseRegistration):
         to the static world (RMS). A scene-flow network's error on a moving object grows
         with its motion and bends the flow across it (ZeroFlow: 10-30 cm over a car 1.1 m
         into its motion), so the object's parts fit different rigid motions. Objects
-        that do not touch are never joined this way. 0 turns this off.
+        that do not touch are never joined this way, nor are touching ones whose flows
+        jump where they touch by more than ``min_motion`` (a bent flow meets itself
+        there; two boxes moving 1 m, one of them 10 cm further, do not). A moving
+        cluster that holds two such objects (an initial cluster spans up to ``tau``) is
+        split in two. 0 turns joining and splitting off.
     tol : float in [0, 1) or None, default=None
         Robust variants: the iterations have converged when one moves at most this
         fraction of the correspondences to another reported cluster, the clusters of
