@@ -1,6 +1,7 @@
 """Shared test set-up: hypothesis profiles and small synthetic scenes."""
 
 import os
+import signal
 
 import numpy as np
 import pytest
@@ -22,6 +23,12 @@ settings.register_profile(
     "thorough", max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow]
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+
+def terminal_sigint():
+    """``preexec_fn`` of a child that must take Ctrl-C as a terminal's job does: SIGINT at
+    its default, even when this test run inherited it ignored (a script's ``cmd &`` job)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def split_init(labels, pieces=3, ratio=2.0, random_state=0):

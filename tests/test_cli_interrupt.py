@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import terminal_sigint
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
@@ -43,6 +44,7 @@ def _start(path, out, cwd):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=terminal_sigint,
     )
     lines = []
     started = threading.Event()
@@ -117,7 +119,11 @@ def test_interrupt_while_k_d_tree_threads_run_in_process_exits_130(tmp_path):
     )
     for _ in range(2):  # the former exit (return 130, then finalise) crashed every time
         result = subprocess.run(
-            [sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True
+            [sys.executable, str(script)],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            preexec_fn=terminal_sigint,
         )
         assert result.returncode == 130, result.stderr
         assert result.stderr.strip().endswith("mmreg: interrupted")

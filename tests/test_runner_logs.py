@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from _fake_av2 import SIZES, STAMPS, box_surface, write_log
+from conftest import terminal_sigint
 
 from mmreg import MultiModelRegistration, SweepRegistration
 from mmreg.cli import main
@@ -429,6 +430,7 @@ def test_ctrl_c_to_the_process_group_is_one_line_and_exit_130(tmp_path):
         text=True,
         start_new_session=True,  # its own process group, as a terminal's foreground job
         env=environment,
+        preexec_fn=terminal_sigint,
     )
     try:
         deadline = time.monotonic() + 240
