@@ -920,8 +920,11 @@ def merge_static_world(
     clustered correspondences. In a crowded scene no motion does: the static world is
     then the cluster that spans the scene, whatever its share
     (:func:`~mmreg.em._static_world.widest_cluster`: the background reaches
-    across the view, an object does not), or none; a cluster that spans the scene also
-    wins over a majority that does not (an object filling half of a camera's view).
+    across the view, an object does not), or, when the background lies in pieces none of
+    which spans it alone, the cluster whose union with the pieces it would gather spans it
+    from behind the others (:func:`~mmreg.em._static_world.spanning_union`), or none;
+    a cluster that spans the scene also wins over a majority that does not (an object
+    filling half of a camera's view).
     With ``ego_motion`` ``(R, t)`` given, it is the largest cluster that moves with it
     (within ``min_motion`` beyond its scatter), whatever its share or spread, or none.
     ``geometry``: the clusters' a-points' :class:`~mmreg._array.moments.Moments`, every row
