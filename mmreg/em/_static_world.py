@@ -28,7 +28,9 @@ its motion within their noise, or slower than ``min_motion`` beyond their scatte
 that share one motion span the scene as readily (three of Table I's seven objects: 0.8-0.96
 of it), so the union must also lie *behind* every other cluster: seen from the sensor, at
 the origin of the points' frame, the background is what the objects stand in front of
-(FlyingThings3D: its RMS range exceeds every object's in every frame measured).
+(FlyingThings3D: its RMS range exceeds every object's in every frame measured). Behind
+means something only in a view from one side (a camera's, every cluster in front of the
+origin); amid the scene (a LiDAR's origin, Table I's objects around it) no union is named.
 
 Both read the clusters' sufficient statistics (:class:`~mmreg._array.moments.Moments`) only.
 """
@@ -171,7 +173,9 @@ def spanning_union(moments, members):
     distance of its a-points from their centroid) is at least :data:`SPANS_THE_SCENE` of
     that of all the clustered a-points; it lies behind every other cluster when its RMS
     distance from the origin (the sensor) exceeds each other cluster's. Of the unions that
-    do both, the widest wins.
+    do both, the widest wins. None is named unless the clusters are seen from one side
+    (each centroid in front of the origin, along the scene's mean direction, by more than
+    the cluster's RMS radius: a camera's view).
 
     Parameters
     ----------
@@ -214,18 +218,18 @@ def spanning_union(moments, members):
     total = count[present].sum()
     centre = first[present].sum(axis=0) / total
     scene = second[present].sum() / total - centre @ centre
-    own_range = second / np.where(present, count, 1.0)
-    if not _in_view(moments.mean_a[present], own_range[present], centre):
+    squared_range = second / np.where(present, count, 1.0)
+    if not _in_view(moments.mean_a[present], squared_range[present], centre):
         return -1
     union = members.astype(float)
     union_count = union @ count
     safe = np.where(union_count > 0, union_count, 1.0)
     union_centre = (union @ first) / safe[:, None]
-    union_range = (union @ second) / safe
-    union_spread = union_range - np.einsum("ij,ij->i", union_centre, union_centre)
-    # Behind every other cluster: its farthest outsider is nearer than the union.
-    outsiders = np.where(~members & present[None, :], own_range[None, :], -np.inf)
-    behind = union_range > outsiders.max(axis=1)
+    union_squared_range = (union @ second) / safe
+    union_spread = union_squared_range - np.einsum("ij,ij->i", union_centre, union_centre)
+    # Behind every other cluster: its farthest outsider is nearer than the union (RMS).
+    outsiders = np.where(~members & present[None, :], squared_range[None, :], -np.inf)
+    behind = union_squared_range > outsiders.max(axis=1)
     spans = union_spread >= SPANS_THE_SCENE**2 * scene
     fit = present & (union_count > 0) & behind & spans & (union_spread > 0)
     if not fit.any():
