@@ -26,9 +26,10 @@ Its pieces move alike, so :func:`spanning_union` reads, for each cluster, the un
 pieces the static world would gather with it (:func:`~mmreg.em._steps.merge_static_world`:
 its motion within their noise, or slower than ``min_motion`` beyond their scatter). Objects
 that share one motion span the scene as readily (three of Table I's seven objects: 0.8-0.96
-of it), so the union must also lie *behind* every other cluster: seen from the sensor, at
+of it), so the union must also lie *behind* the other clusters: seen from the sensor, at
 the origin of the points' frame, the background is what the objects stand in front of
-(FlyingThings3D: its RMS range exceeds every object's in every frame measured). Behind
+(FlyingThings3D: its RMS range exceeds every object's in every frame measured, and that of
+all the objects together 1.4-5 times). Behind
 means something only in a view from one side (a camera's, every cluster in front of the
 origin); amid the scene (a LiDAR's origin, Table I's objects around it) no union is named.
 
@@ -166,13 +167,13 @@ def _in_view(means, squared_ranges, centre):
 
 def spanning_union(moments, members):
     """The cluster whose union with the pieces that move with it spans the scene and lies
-    behind every other cluster, or -1 if none does.
+    behind the other clusters, or -1 if none does.
 
     Row ``j`` of ``members`` marks the clusters gathered with cluster ``j`` were it the
     static world (itself included). The union spans the scene when its spread (the RMS
     distance of its a-points from their centroid) is at least :data:`SPANS_THE_SCENE` of
-    that of all the clustered a-points; it lies behind every other cluster when its RMS
-    distance from the origin (the sensor) exceeds each other cluster's. Of the unions that
+    that of all the clustered a-points; it lies behind the other clusters when its RMS
+    distance from the origin (the sensor) exceeds theirs, taken together. Of the unions that
     do both, the widest wins. None is named unless the clusters are seen from one side
     (each centroid in front of the origin, along the scene's mean direction, by more than
     the cluster's RMS radius: a camera's view).
@@ -227,9 +228,11 @@ def spanning_union(moments, members):
     union_centre = (union @ first) / safe[:, None]
     union_squared_range = (union @ second) / safe
     union_spread = union_squared_range - np.einsum("ij,ij->i", union_centre, union_centre)
-    # Behind every other cluster: its farthest outsider is nearer than the union (RMS).
-    outsiders = np.where(~members & present[None, :], squared_range[None, :], -np.inf)
-    behind = union_squared_range > outsiders.max(axis=1)
+    # Behind the other clusters taken together (RMS ranges): one far fragment of the
+    # background that fits a motion of its own must not hide the rest of it.
+    outside = (~members & present[None, :]).astype(float)
+    outside_count = outside @ count
+    behind = (outside_count == 0) | (union_squared_range * outside_count > outside @ second)
     spans = union_spread >= SPANS_THE_SCENE**2 * scene
     fit = present & (union_count > 0) & behind & spans & (union_spread > 0)
     if not fit.any():
