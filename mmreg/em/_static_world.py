@@ -174,7 +174,7 @@ def spanning_union(moments, members):
     distance of its a-points from their centroid) is at least :data:`SPANS_THE_SCENE` of
     that of all the clustered a-points; it lies behind the other clusters when its RMS
     distance from the origin (the sensor) exceeds theirs, taken together. Of the unions that
-    do both, the widest wins. None is named unless the clusters are seen from one side
+    do both, the largest wins. None is named unless the clusters are seen from one side
     (each centroid in front of the origin, along the scene's mean direction, by more than
     the cluster's RMS radius: a camera's view).
 
@@ -237,4 +237,6 @@ def spanning_union(moments, members):
     fit = present & (union_count > 0) & behind & spans & (union_spread > 0)
     if not fit.any():
         return -1
-    return int(np.argmax(np.where(fit, union_spread, -np.inf)))
+    # The largest such union: a few far points scattered over the backdrop (a fragment
+    # whose flow errs alike) can be wider than the backdrop's body, not larger.
+    return int(np.argmax(np.where(fit, union_count, -np.inf)))
