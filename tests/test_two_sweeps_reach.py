@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from mmreg import SweepRegistration
 from mmreg.datasets import make_lidar_sweeps
-from mmreg.sweeps._plane_slides import slides_in_plane
+from mmreg.sweeps._ambiguous_shapes import is_line, slides_in_plane
 
 
 def _relative_step(scene, k):
@@ -79,3 +79,6 @@ def test_a_flat_patch_slides_along_its_plane_not_across_it(angles, in_plane, len
     # A box of the same size is not flat: it never slides.
     box = rng.uniform(-1, 1, (80, 3)) @ turn.T
     assert not slides_in_plane(box, np.zeros(80, int), 1, (rotations[:1], translations[:1]), ego)[0]
+    assert not is_line(np.vstack([patch, box]), groups, 2).any()
+    pole = np.c_[rng.normal(0, 0.02, (80, 2)), rng.uniform(0, length, 80)] @ turn.T
+    assert is_line(pole, np.zeros(80, int), 1)[0]

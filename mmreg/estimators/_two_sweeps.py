@@ -29,6 +29,7 @@ from mmreg._array.grouping import group_bounds
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
 from mmreg._validation import check_coordinate_range, check_ego_motion, invalid_rows
+from mmreg.sweeps._ambiguous_shapes import is_line, slides_in_plane
 from mmreg.sweeps._deskew import deskew, relative_motions
 from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
 from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
@@ -38,7 +39,6 @@ from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_swe
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
 from mmreg.sweeps._islands import voxel_islands
-from mmreg.sweeps._plane_slides import slides_in_plane
 from mmreg.sweeps._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
 
 __all__ = ["SweepRegistration"]
@@ -1077,8 +1077,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                     subset, int(lost.sum()), search, reach, wide_rng
                 )
                 where = np.flatnonzero(lost)
-                # Twice as far, a flat patch finds more of its plane to slide along.
+                # Twice as far, a flat patch finds more of its plane to slide along and
+                # a pole more poles to match.
                 found &= ~slides_in_plane(a, subset, len(where), (sub_r, sub_t), ego)
+                found &= ~is_line(a, subset, len(where))
                 moving[where] = found
                 rotations[where[found]], translations[where[found]] = sub_r[found], sub_t[found]
                 unexplained[where] = sub_unexplained
