@@ -40,6 +40,18 @@ class StampedPoints(Artist):
         Stroke width in points (0: a filled marker without an edge).
     **kwargs
         Artist properties (``zorder``, ``rasterized``, ...).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from matplotlib.figure import Figure
+    >>> from mmreg.plotting._stamped import StampedPoints
+    >>> ax = Figure().add_subplot()
+    >>> xy = np.array([[0.2, 0.5], [0.4, 0.5], [0.6, 0.5]])
+    >>> greys = [(0.7, 0.7, 0.7), (0.3, 0.3, 0.3)]  # the dark grey drawn over the light
+    >>> points = ax.add_artist(StampedPoints(xy, [0, 1, 1], greys, 2.0))
+    >>> points.get_offsets().shape
+    (3, 2)
     """
 
     def __init__(self, xy, color_index, palette, size, *, marker="o", linewidth=0.0, **kwargs):
