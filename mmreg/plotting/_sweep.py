@@ -80,6 +80,24 @@ def _draw_static(ax, points, diameter):
     )
 
 
+def _draw_outliers(ax, points, diameter):
+    """The outliers as black crosses, over the static world."""
+    from mmreg.plotting._stamped import StampedPoints
+
+    ax.add_artist(
+        StampedPoints(
+            points[:, :2],
+            np.zeros(len(points), dtype=np.int64),
+            [(0.0, 0.0, 0.0)],
+            2.5 * diameter,
+            marker="x",
+            linewidth=0.5,
+            rasterized=True,
+            zorder=2,
+        )
+    )
+
+
 def _sweep_axes(ax):
     if ax is not None:
         return ax
@@ -212,8 +230,6 @@ def plot_sweep(
     if interval is not None and not (np.isfinite(interval) and interval > 0):
         raise ValueError(f"interval must be a positive number of seconds; got {interval!r}.")
     center = np.asarray(center, dtype=float).reshape(2)
-    from mmreg.plotting._stamped import StampedPoints
-
     ax = _sweep_axes(ax)
     n_clusters = int(labels.max(initial=-1)) + 1
     reference = _static_reference(labels, moving, n_clusters)
@@ -247,18 +263,7 @@ def plot_sweep(
     _draw_static(ax, points[static], diameter)
     outliers = np.flatnonzero(window & (labels < 0))
     if len(outliers):
-        ax.add_artist(
-            StampedPoints(
-                points[outliers, :2],
-                np.zeros(len(outliers), dtype=np.int64),
-                [(0.0, 0.0, 0.0)],
-                2.5 * diameter,
-                marker="x",
-                linewidth=0.5,
-                rasterized=True,
-                zorder=2,
-            )
-        )
+        _draw_outliers(ax, points[outliers], diameter)
     # One round factor for every arrow, from their lengths seen from above.
     scale = _sweep_layout.arrow_scale(
         [np.linalg.norm(d[:2]) for d in displacement.values()], 2 * range_
