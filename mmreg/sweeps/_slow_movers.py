@@ -46,7 +46,7 @@ from scipy.spatial import cKDTree
 
 from mmreg._array.motion import _group_median
 from mmreg._array.unique_rows import unique_rows
-from mmreg.sweeps._icp import multi_body_icp, subsample_groups
+from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._islands import voxel_islands
 
 __all__ = ["beyond_spacing", "slow_movers"]
@@ -55,6 +55,8 @@ __all__ = ["beyond_spacing", "slow_movers"]
 _UNEXPLAINED = 2.0
 # Neighbourhoods of the second sweep flatter than this are lines (no plane).
 _MIN_FLATNESS = 0.2
+# Points of the neighbourhoods whose PCA gives the first sweep's normals (as the ICP's).
+_NORMAL_POINTS = 10
 # Share of a seed's points the new motion must explain.
 _MIN_EXPLAINED = 0.6
 # The new motion departs from the ego motion by more than this many spacings, and
@@ -123,21 +125,31 @@ def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep, normals=
     return departure > _MIN_SPACINGS * _group_median(spacing, groups, n_groups)
 
 
-def _unexplained(points, tree, sweep, normals):
+def _unexplained(points, tree, sweep, normals, scale):
     """Whether the second sweep leaves each point unexplained, and the distance ratio.
 
     Unexplained: more than ``_UNEXPLAINED`` spacings from the nearest point of the
     sweep and, where the sweep's neighbourhood there is a surface, more than one
     spacing off its plane (a point of a surface the other sweep saw elsewhere, e.g.
-    behind a moving object, lies on the plane but far from its points).
+    behind a moving object, lies on the plane but far from its points); or, where the
+    sweep is a surface, more than one spacing from its nearest point and more than
+    ``_MIN_SCALES`` robust residual scales (``scale``, the ego ICP's point-to-plane
+    noise) off its plane. The second rule sees a body that moves less than two
+    spacings towards or away from its surface's normal (a pedestrian walking 0.1 m
+    where the sweep samples every 6 cm): the nearest point is still close, but the
+    surface is displaced by many times the noise. Within one spacing of a point of the
+    sweep, a point is explained whatever the plane says (edges, curved surfaces).
     """
     ratio, nearest, spacing = _spacing_ratio(points, tree, sweep, normals)
-    far = np.flatnonzero(ratio > _UNEXPLAINED)
+    far = np.flatnonzero(ratio > 1.0)
     unexplained = np.zeros(len(points), dtype=bool)
     if len(far):
         normal, _, flatness = normals(nearest[far])
         along = np.abs(np.einsum("ni,ni->n", normal, points[far] - sweep[nearest[far]]))
-        unexplained[far] = (flatness < _MIN_FLATNESS) | (along > spacing[far])
+        line = flatness < _MIN_FLATNESS
+        beyond = ratio[far] > _UNEXPLAINED
+        off_plane = ~line & (along > _MIN_SCALES * scale)
+        unexplained[far] = (beyond & (line | (along > spacing[far]))) | off_plane
     return unexplained, ratio
 
 
@@ -226,7 +238,7 @@ def slow_movers(
     none = (np.full(n, -1, dtype=np.intp), np.zeros((0, 3, 3)), np.zeros((0, 3)))
     if moved is None:
         moved = a @ ego[0].T + ego[1]
-    unexplained, _ = _unexplained(moved, tree, sweep, normals)
+    unexplained, _ = _unexplained(moved, tree, sweep, normals, scale)
     candidates = np.flatnonzero(free & unexplained)
     if len(candidates) < min_size:
         return none
@@ -260,11 +272,14 @@ def slow_movers(
     departure = _group_median(np.linalg.norm(after - moved[chosen], axis=1), g, n_seeds)
     seed_spacing = _group_median(spacing, g, n_seeds)
     # The second sweep's points the seed lands on, and whether the first sweep at rest
-    # explains them (its spacing measured among its own points).
+    # explains them, by the rule that chose the seeds (its spacing and planes measured
+    # among its own points): a body that moves less than its size lands partly on its
+    # old place, but its displaced faces lie off the old ones' planes.
     pairs = unique_rows(np.column_stack([g[explained], landing[explained]]))
     if len(pairs):
-        near, _, _ = _spacing_ratio(sweep[pairs[:, 1]], resting, resting.data)
-        at_rest = np.bincount(pairs[:, 0], weights=near <= _UNEXPLAINED, minlength=n_seeds)
+        rest_normals = SurfaceNormals(resting.data, resting, _NORMAL_POINTS)
+        new, _ = _unexplained(sweep[pairs[:, 1]], resting, resting.data, rest_normals, scale)
+        at_rest = np.bincount(pairs[:, 0], weights=~new, minlength=n_seeds)
         landed = np.bincount(pairs[:, 0], minlength=n_seeds)
     else:
         at_rest = landed = np.zeros(n_seeds)
