@@ -37,6 +37,7 @@ from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_swe
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
 from mmreg.sweeps._islands import voxel_islands
+from mmreg.sweeps._new_places import MIN_NEW_PLACE, new_place_shares
 from mmreg.sweeps._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
 
 __all__ = ["SweepRegistration"]
@@ -145,7 +146,10 @@ def _join_slides(a, labels, motions, static, sigma, target):
     the static world: it joins it, with the static world's motion. So does a cluster
     whose motion moves its points (median) by less than half the second sweep's sampling
     spacing where they land (``target``: the second sweep, its cKDTree and its
-    SurfaceNormals): no sweep can show such a motion, whatever the noise.
+    SurfaceNormals): no sweep can show such a motion, whatever the noise. And so does
+    a cluster that its motion shows at a new place with fewer than a tenth of its
+    points (:mod:`mmreg.sweeps._new_places`): a pole or a wall slid up or down along
+    itself lands on surfaces the first sweep held already.
 
     ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; returns the
     labels, the same arrays without the joined clusters, and the static world's new
@@ -169,8 +173,10 @@ def _join_slides(a, labels, motions, static, sigma, target):
     _, _, spacing = _spacing_ratio(moved, tree, sweep, sweep_normals)
     departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
+    # A cluster whose motion shows none of it at a new place slid onto static surfaces.
+    nowhere = new_place_shares(a, labels, motions[:2], static, sigma, target) < MIN_NEW_PLACE
     slides = np.bincount(group, minlength=n_clusters) > 0
-    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen
+    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere
     if not slides.any():
         return labels, motions, static
     kept = ~slides
