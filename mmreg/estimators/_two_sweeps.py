@@ -133,7 +133,7 @@ def _check_timing(times, sweep_times, interval, n, m):
     return _check_times(times, n, "times"), _check_times(sweep_times, m, "sweep_times"), interval
 
 
-def _join_slides(a, labels, motions, static, sigma, target):
+def _join_slides(a, labels, motions, static, sigma, target, whole=None):
     """The static world takes back every cluster that only slides along its own surfaces.
 
     A planar patch (a wall, a kerb, a strip of road) constrains only motion along its
@@ -151,9 +151,10 @@ def _join_slides(a, labels, motions, static, sigma, target):
     points (:mod:`mmreg.sweeps._new_places`): a pole or a wall slid up or down along
     itself lands on surfaces the first sweep held already.
 
-    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; returns the
-    labels, the same arrays without the joined clusters, and the static world's new
-    index.
+    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; ``whole``:
+    both sweeps with their ground, for the new places (see
+    :func:`mmreg.sweeps._new_places.new_place_shares`); returns the labels, the same
+    arrays without the joined clusters, and the static world's new index.
     """
     rotations, translations = motions[:2]
     others = np.flatnonzero((labels >= 0) & (labels != static))
@@ -174,7 +175,8 @@ def _join_slides(a, labels, motions, static, sigma, target):
     departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
     # A cluster whose motion shows none of it at a new place slid onto static surfaces.
-    nowhere = new_place_shares(a, labels, motions[:2], static, sigma, target) < MIN_NEW_PLACE
+    shares = new_place_shares(a, labels, motions[:2], static, sigma, target, whole=whole)
+    nowhere = shares < MIN_NEW_PLACE
     slides = np.bincount(group, minlength=n_clusters) > 0
     slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere
     if not slides.any():
@@ -1201,7 +1203,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             return self._raw(a, context, (ego, probe), sigma)
         ground, sweep_ground = masks
         self.ground_mask_, self.sweep_ground_mask_ = ground, sweep_ground
-        sweep, _, _, rng, timing = context
+        sweep, whole_tree, whole_normals, rng, timing = context
         off, sweep_off = ~ground, ~sweep_ground
         if off.sum() < 3 or sweep_off.sum() < _MIN_SWEEP_POINTS:
             raise ValueError(
@@ -1220,8 +1222,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             rng,
             timing,
         )
+        # The new places are judged against both sweeps whole: the two masks of the
+        # ground differ at objects' feet, where a surface left in one sweep only would
+        # read as new.
+        whole = (a, (sweep, whole_tree, whole_normals))
         labels_off, estimator, rotations, translations, scales, sigmas, static = self._raw(
-            a[off], context, (ego, probe), sigma
+            a[off], context, (ego, probe), sigma, whole
         )
         if static < 0:  # the ground is the static world's first member
             static = len(rotations)
@@ -1233,7 +1239,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         labels[off] = labels_off
         return labels, estimator, rotations, translations, scales, sigmas, static
 
-    def _raw(self, a, context, egos, sigma):
+    def _raw(self, a, context, egos, sigma, whole=None):
         # ``egos``: the ego motion reported (the static world's), and the one the islands
         # are tested and the clusters started at (see _ego_motion).
         ego, probe = egos
@@ -1276,6 +1282,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 static,
                 sigma,
                 (sweep, tree, normals),
+                whole,
             )
         return labels, estimator, rotations, translations, scales, sigmas, static
 

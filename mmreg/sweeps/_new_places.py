@@ -30,7 +30,7 @@ MIN_NEW_PLACE = _MIN_EXPLAINED
 _NORMAL_POINTS = 10
 
 
-def new_place_shares(a, labels, motions, static, scale, target):
+def new_place_shares(a, labels, motions, static, scale, target, whole=None):
     """Share of each cluster's points that its motion shows at a new place.
 
     A point counts when the static world's motion leaves it unexplained by the second
@@ -53,6 +53,13 @@ def new_place_shares(a, labels, motions, static, scale, target):
     target : tuple
         ``(sweep, tree, normals)``: the second sweep, its cKDTree and its
         :class:`mmreg.sweeps._icp.SurfaceNormals`.
+    whole : tuple or None
+        ``(points, target)``: the first sweep and the second (as ``target``) with the
+        ground that ``a`` and ``target`` leave out. Whether the static world's motion
+        explains a point, and whether the first sweep explains a landing place, is then
+        asked of the whole sweeps: the two masks of the ground differ at objects' feet,
+        and a surface left in one sweep only would read as new. None: ``a`` and
+        ``target`` are whole.
 
     Returns
     -------
@@ -96,9 +103,13 @@ def new_place_shares(a, labels, motions, static, scale, target):
     if not len(members):
         return shares
     sweep, tree, normals = target
+    first, (whole_sweep, whole_tree, whole_normals) = (a, target) if whole is None else whole
     counts = np.bincount(labels[members], minlength=n_clusters)
-    at_rest = a @ rotations[static].T + translations[static]
-    unexplained, _ = _unexplained(at_rest[members], tree, sweep, normals, scale)
+    rest = rotations[static], translations[static]
+    at_rest = first @ rest[0].T + rest[1]
+    unexplained, _ = _unexplained(
+        a[members] @ rest[0].T + rest[1], whole_tree, whole_sweep, whole_normals, scale
+    )
     rows = members[unexplained]
     group = labels[rows]
     moved = np.einsum("nij,nj->ni", rotations[group], a[rows]) + translations[group]

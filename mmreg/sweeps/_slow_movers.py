@@ -12,7 +12,10 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
    the second sweep is more than 2 spacings away (the spacing there: the distance
    from that point to its own nearest neighbour in the second sweep) and, where the
    second sweep is a surface there, more than one spacing off its plane (a wall seen
-   behind a moving object in one sweep only lies on the plane, far from its points).
+   behind a moving object in one sweep only lies on the plane, far from its points);
+   or, where the second sweep is a surface, more than one spacing from its nearest
+   point and more than 3 robust residual scales of the ego motion off its plane (a
+   body that moves less than two spacings along its faces' normals).
    The unexplained points that no moving island holds are cut into tight islands
    (voxels of side ``cell``, half the islands').
 2. **Motion**: every seed is aligned to the second sweep by the robust multi-body ICP
@@ -22,16 +25,16 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
    * *residual drop*: at least 60% of the seed's points are explained (within 2
      spacings) after the ICP; every one of them was unexplained before (the rest are
      parts the second sweep does not see);
-   * *departure*: the ICP moves the seed's points (median) by more than 2 spacings
+   * *departure*: the ICP moves the seed's points (median) by more than one spacing
      (median over its matches) and 3 robust residual scales of the ego motion away
-     from where the ego motion puts them;
+     from where the ego motion puts them: what the seeds' rule can see;
    * *the landing place is new*: of the second sweep's points that the moved seed
-     lands on, fewer than half lie within 2 of the first sweep's spacings of a first
-     sweep point moved by the ego motion. A static strip that the ICP slides onto a
-     neighbouring static surface lands on points that were there already; an object
-     lands where nothing was. This is the test that separates the two on the shared
-     Argoverse 2 pairs: the static seeds that pass the others land 77-100% on
-     points at rest, the pedestrian 26%.
+     lands on, fewer than half are explained by the first sweep moved by the ego
+     motion, by the seeds' rule (spacings and planes of the first sweep). A static
+     strip that the ICP slides onto a neighbouring static surface lands on points
+     that were there already; an object lands where nothing was, or, when it moves
+     less than its size, on its old place shifted off its faces' planes. This is
+     the test that separates the two on the shared Argoverse 2 pairs.
 
 4. **Members**: within the seed's ``cell`` islands, the points that the new motion
    explains and the ego motion does not; then, over at most 10 rounds, the points that
@@ -62,6 +65,10 @@ _MIN_EXPLAINED = 0.6
 # The new motion departs from the ego motion by more than this many spacings, and
 # this many ego residual scales.
 _MIN_SPACINGS = 2.0
+# A slow mover's motion departs from the ego motion by more than this many spacings
+# (and _MIN_SCALES scales): a point that far and off its plane is one the seeds' rule
+# calls unexplained.
+_MIN_DEPARTURE = 1.0
 _MIN_SCALES = 3.0
 # Largest share of the landing points that the first sweep at rest explains.
 _MAX_RESTING = 0.5
@@ -284,7 +291,7 @@ def slow_movers(
     else:
         at_rest = landed = np.zeros(n_seeds)
     new_place = (landed > 0) & (at_rest < _MAX_RESTING * np.maximum(landed, 1))
-    margin = np.maximum(_MIN_SPACINGS * seed_spacing, _MIN_SCALES * scale)
+    margin = np.maximum(_MIN_DEPARTURE * seed_spacing, _MIN_SCALES * scale)
     accepted = np.flatnonzero(
         (share >= _MIN_EXPLAINED) & (departure > margin) & new_place & (counts >= min_size)
     )
