@@ -22,9 +22,11 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
    (:mod:`mmreg.sweeps._icp`), started at the ego motion.
 3. **Tests** (all must hold):
 
-   * *residual drop*: at least 60% of the seed's points are explained (within 2
-     spacings) after the ICP; every one of them was unexplained before (the rest are
-     parts the second sweep does not see);
+   * *residual drop*: at least 60% of the seed's points are explained after the ICP,
+     within 2 of their own spacings in the first sweep (a body that moves a few
+     spacings is seen again from about where it was, about as densely: a much
+     sparser landing place, isolated returns, explains nothing); every one of them
+     was unexplained before (the rest are parts the second sweep does not see);
    * *departure*: the ICP moves the seed's points (median) by more than one spacing
      (median over its matches) and 3 robust residual scales of the ego motion away
      from where the ego motion puts them: what the seeds' rule can see;
@@ -95,6 +97,16 @@ def _spacing_ratio(points, tree, sweep, normals=None):
         spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
     spacing = np.maximum(spacing, np.finfo(float).tiny)
     return distance / spacing, nearest, spacing
+
+
+def _own_spacing(points, tree):
+    """Distance from each point to its nearest other point of the set ``tree`` holds.
+
+    ``points`` may belong to that set (then the nearest at distance zero is itself) or
+    not.
+    """
+    distance, _ = tree.query(points, k=2)
+    return np.where(distance[:, 0] > 0, distance[:, 0], distance[:, 1])
 
 
 def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep, normals=None):
@@ -273,7 +285,7 @@ def slow_movers(
     g = seeds[chosen]
     after = np.einsum("nij,nj->ni", R[g], a[chosen]) + t[g]
     ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep, normals)
-    explained = ratio_after <= _UNEXPLAINED
+    explained = ratio_after * spacing <= _UNEXPLAINED * _own_spacing(moved[chosen], resting)
     counts = np.maximum(np.bincount(g, minlength=n_seeds), 1)
     share = np.bincount(g, weights=explained, minlength=n_seeds) / counts
     departure = _group_median(np.linalg.norm(after - moved[chosen], axis=1), g, n_seeds)
