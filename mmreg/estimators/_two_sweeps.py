@@ -33,13 +33,7 @@ from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
 from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
 from mmreg.sweeps._ego_motion import _RESIDUAL_POINTS as _EGO_RESIDUAL_POINTS
 from mmreg.sweeps._ego_motion import _residual_scale, ego_motion
-from mmreg.sweeps._ground import (
-    METRE_TAU,
-    ground_mask,
-    ground_under_objects,
-    has_ground,
-    is_z_up_sweep,
-)
+from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
 from mmreg.sweeps._islands import voxel_islands
@@ -1243,8 +1237,6 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             sigmas = np.concatenate([sigmas, [np.nan]])
         labels = np.full(len(a), -1 if self.ground == "drop" else static, dtype=labels_off.dtype)
         labels[off] = labels_off
-        if self.ground != "drop":  # the ground under an object moves with it
-            labels = ground_under_objects(a, ground, labels, static)
         return labels, estimator, rotations, translations, scales, sigmas, static
 
     def _raw(self, a, context, egos, sigma, whole=None):

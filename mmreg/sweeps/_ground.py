@@ -21,9 +21,8 @@ import os
 import sys
 
 import numpy as np
-from scipy.spatial import Delaunay, QhullError
 
-__all__ = ["ground_mask", "ground_under_objects", "has_ground", "is_z_up_sweep"]
+__all__ = ["ground_mask", "has_ground", "is_z_up_sweep"]
 
 # The estimator's tau that stands for metres (MultiModelRegistration's LiDAR default).
 METRE_TAU = 5.0
@@ -192,69 +191,3 @@ def has_ground(points, mask):
     occupied = np.bincount(sector, minlength=_SECTORS) > 0
     grounded = np.bincount(sector[mask], minlength=_SECTORS) > 0
     return bool(grounded.sum() >= _MIN_GROUND_COVER * occupied.sum())
-
-
-def ground_under_objects(points, ground, labels, static):
-    """The cluster of every ground point that lies under an object: in its footprint.
-
-    The ground of a sweep is given to the static world, but the ground found under a
-    car or at a pedestrian's feet holds the object's own lowest returns (tyres, shoes)
-    as well as road it hides, and the flows derived from boxes (Argoverse 2, nuScenes,
-    KITTI's scene flow) move every point in an object's box with the object. A ground
-    point takes the cluster of an object (any cluster but the static world) when it
-    lies within the convex hull of that object's points seen from above (z up).
-
-    Parameters
-    ----------
-    points : ndarray of shape (n, 3)
-        The sweep, z up.
-    ground : ndarray of shape (n,), bool
-        Its ground points.
-    labels : ndarray of shape (n,)
-        Cluster of every point off the ground (``-1``: none); the ground's labels are
-        ignored.
-    static : int
-        The static world's cluster (its footprint is everything: left out).
-
-    Returns
-    -------
-    ndarray of shape (n,)
-        ``labels`` where every ground point under an object holds the object's
-        cluster (the first, should footprints overlap) and the others are unchanged.
-
-    Examples
-    --------
-    A road with a 1 m box on it (cluster 1) and a wall (cluster 0, the static world):
-
-    >>> import numpy as np
-    >>> g = np.arange(-3, 3, 0.25)
-    >>> road = np.stack(np.meshgrid(g, g, [0.0], indexing="ij"), -1).reshape(-1, 3)
-    >>> box = np.array([[x, y, z] for x in (-0.1, 1.1) for y in (-0.1, 1.1) for z in (0.2, 1)])
-    >>> wall = np.array([[-3.0, y, z] for y in g for z in (0.5, 1.5)])
-    >>> points = np.vstack([road, box, wall])
-    >>> ground = np.r_[np.ones(len(road), bool), np.zeros(len(box) + len(wall), bool)]
-    >>> labels = np.r_[np.zeros(len(road), int), np.ones(len(box), int), np.zeros(len(wall), int)]
-    >>> out = ground_under_objects(points, ground, labels, 0)
-    >>> int((out[: len(road)] == 1).sum())  # the road points from (0, 0) to (1, 1)
-    25
-    """
-    labels = np.array(labels, copy=True)
-    objects = np.unique(labels[~ground & (labels >= 0) & (labels != static)])
-    under = np.flatnonzero(ground)
-    taken = np.zeros(len(under), dtype=bool)
-    for k in objects:
-        xy = points[~ground & (labels == k), :2]
-        low, high = xy.min(axis=0), xy.max(axis=0)
-        near = np.flatnonzero(
-            ~taken & np.all((points[under, :2] >= low) & (points[under, :2] <= high), axis=1)
-        )
-        if len(xy) < 3 or not len(near):
-            continue
-        try:
-            hull = Delaunay(xy)
-        except QhullError:  # all on one line seen from above: no footprint
-            continue
-        inside = near[hull.find_simplex(points[under[near], :2]) >= 0]
-        labels[under[inside]] = k
-        taken[inside] = True
-    return labels
