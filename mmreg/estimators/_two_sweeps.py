@@ -257,12 +257,16 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       explained, and mmreg's moving rule; :mod:`mmreg.sweeps._island_motions`). Small objects
       that move a few sampling spacings (a pedestrian beside a wall) stay within that
       margin; they are found point by point among the islands that keep the ego
-      motion (the points the ego motion leaves far from the second sweep, aligned by
-      ICP; kept when they land where the first sweep had nothing;
+      motion (the points the ego motion leaves far from the second sweep or off its
+      surfaces, aligned by ICP; kept when they land where the first sweep explains
+      nothing;
       :mod:`mmreg.sweeps._slow_movers`) and become islands of their own. The islands'
       motions become putative correspondences for ``estimator``; the static world keeps
       the ego motion and the other clusters are refined as above. This repeats while the
       labels change (at most ``max_rounds`` times): a multi-body ICP around the EM.
+      A cluster that only slides along its own surfaces, or that its motion shows at a
+      new place with under a tenth of its points (:mod:`mmreg.sweeps._new_places`),
+      then rejoins the static world.
 
     Parameters
     ----------
