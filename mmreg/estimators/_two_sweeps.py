@@ -133,7 +133,7 @@ def _check_timing(times, sweep_times, interval, n, m):
     return _check_times(times, n, "times"), _check_times(sweep_times, m, "sweep_times"), interval
 
 
-def _join_slides(a, labels, motions, static, sigma, target, whole=None):
+def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     """The static world takes back every cluster that only slides along its own surfaces.
 
     A planar patch (a wall, a kerb, a strip of road) constrains only motion along its
@@ -151,7 +151,8 @@ def _join_slides(a, labels, motions, static, sigma, target, whole=None):
     points (:mod:`mmreg.sweeps._new_places`): a pole or a wall slid up or down along
     itself lands on surfaces the first sweep held already.
 
-    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; ``whole``:
+    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; ``reach``:
+    the ICP's gate; ``whole``:
     both sweeps with their ground, for the new places (see
     :func:`mmreg.sweeps._new_places.new_place_shares`); returns the labels, the same
     arrays without the joined clusters, and the static world's new index.
@@ -175,7 +176,9 @@ def _join_slides(a, labels, motions, static, sigma, target, whole=None):
     departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
     # A cluster whose motion shows none of it at a new place slid onto static surfaces.
-    shares = new_place_shares(a, labels, motions[:2], static, sigma, target, whole=whole)
+    shares = new_place_shares(
+        a, labels, motions[:2], static, sigma, target, reach=reach, whole=whole
+    )
     nowhere = shares < MIN_NEW_PLACE
     slides = np.bincount(group, minlength=n_clusters) > 0
     slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere
@@ -1286,6 +1289,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 static,
                 sigma,
                 (sweep, tree, normals),
+                self.max_distance_,
                 whole,
             )
         return labels, estimator, rotations, translations, scales, sigmas, static
