@@ -34,7 +34,7 @@ def test_a_strip_slid_down_a_wall_shows_no_new_place():
     labels = np.repeat([0, 1, 2], [len(wall), len(strip), len(box)])
     translations = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -0.5], [0.5, 0.0, 0.0]])
     motions = (np.stack([np.eye(3)] * 3), translations)
-    shares = new_place_shares(a, labels, motions, 0, 0.005, _target(sweep), reach=1.0)
+    shares = new_place_shares(a, labels, motions, 0, 0.005, _target(sweep))
     assert shares[1] == 0.0
     # A face seen flat on that slides along itself is on its plane at rest: the ego
     # motion explains it, and it shows nothing either.
@@ -52,7 +52,7 @@ def test_a_box_moved_by_half_its_size_shows_new_places():
     sweep = np.vstack([wall, box + [0.5, 0.0, 0.0]])
     labels = np.r_[np.zeros(len(wall), int), np.ones(len(box), int)]
     motions = (np.stack([np.eye(3)] * 2), np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]]))
-    shares = new_place_shares(a, labels, motions, 0, 0.005, _target(sweep), reach=1.0)
+    shares = new_place_shares(a, labels, motions, 0, 0.005, _target(sweep))
     # The face (half the box) lands where nothing was; the side slides along itself.
     assert shares[1] > 2 * MIN_NEW_PLACE
 

@@ -152,7 +152,7 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     itself lands on surfaces the first sweep held already.
 
     ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; ``reach``:
-    the ICP's gate; ``whole``:
+    the ICP's gate with capture times, else None; ``whole``:
     both sweeps with their ground, for the new places (see
     :func:`mmreg.sweeps._new_places.new_place_shares`); returns the labels, the same
     arrays without the joined clusters, and the static world's new index.
@@ -1289,7 +1289,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 static,
                 sigma,
                 (sweep, tree, normals),
-                self.max_distance_,
+                # Motions fitted to deskewed points put the raw ones near their view.
+                None if context[4] is None else self.max_distance_,
                 whole,
             )
         return labels, estimator, rotations, translations, scales, sigmas, static

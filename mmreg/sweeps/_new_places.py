@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from mmreg.sweeps._icp import SurfaceNormals
 from mmreg.sweeps._island_motions import _MIN_EXPLAINED
-from mmreg.sweeps._slow_movers import _unexplained
+from mmreg.sweeps._slow_movers import _UNEXPLAINED, _spacing_ratio, _unexplained
 
 __all__ = ["MIN_NEW_PLACE", "new_place_shares"]
 
@@ -30,17 +30,13 @@ MIN_NEW_PLACE = _MIN_EXPLAINED
 _NORMAL_POINTS = 10
 
 
-def new_place_shares(a, labels, motions, static, scale, target, *, reach, whole=None):
+def new_place_shares(a, labels, motions, static, scale, target, *, reach=None, whole=None):
     """Share of each cluster's points that its motion shows at a new place.
 
     A point counts when the static world's motion leaves it unexplained by the second
-    sweep, its cluster's motion puts it within ``reach`` of a point of the second
-    sweep (the nearest), and that point of the second sweep is itself unexplained by
-    the first sweep moved by the static world's motion. ``reach`` is the ICP's gate,
-    not a sampling spacing: a body scanned by a spinning sensor is skewed by its own
-    motion over the sweep (copies 0.4 m apart at 8 m/s on Argoverse 2), and its
-    motion between the sweeps' reference times puts its points near, not on, its
-    second view.
+    sweep, its cluster's motion puts it within two spacings of a point of the second
+    sweep (or within ``reach``), and that point of the second sweep (the nearest) is
+    itself unexplained by the first sweep moved by the static world's motion.
 
     Parameters
     ----------
@@ -57,9 +53,13 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach, whole=
     target : tuple
         ``(sweep, tree, normals)``: the second sweep, its cKDTree and its
         :class:`mmreg.sweeps._icp.SurfaceNormals`.
-    reach : float
-        Largest distance from a moved point to its landing place (the ICP's
-        ``max_distance``).
+    reach : float or None, default=None
+        Largest distance from a moved point to its landing place; None: two of the
+        second sweep's spacings there. Motions fitted to deskewed points (capture
+        times) take the ICP's gate: a body scanned by a spinning sensor is skewed by
+        its own motion over the sweep (copies 0.4 m apart at 8 m/s on Argoverse 2),
+        and its motion between the sweeps' reference times puts its raw points near,
+        not on, its second view.
     whole : tuple or None
         ``(points, target)``: the first sweep and the second (as ``target``) with the
         ground that ``a`` and ``target`` leave out. Whether the static world's motion
@@ -93,13 +93,13 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach, whole=
     >>> labels = np.r_[np.zeros(len(wall), int), np.ones(len(block), int)]
     >>> motions = (np.stack([np.eye(3)] * 2), np.array([[0.0, 0, 0], [0.5, 0, 0]]))
     >>> shares = new_place_shares(
-    ...     a, labels, motions, 0, 0.005, (sweep, tree, SurfaceNormals(sweep, tree, 10)), reach=1.0)
+    ...     a, labels, motions, 0, 0.005, (sweep, tree, SurfaceNormals(sweep, tree, 10)))
     >>> bool(shares[1] > 0.2)
     True
     >>> labels[: len(wall)][wall[:, 0] > 3] = 2  # a strip of the wall, slid along it
     >>> motions = (np.stack([np.eye(3)] * 3), np.array([[0.0, 0, 0], [0.5, 0, 0], [0, 0, 0.4]]))
     >>> shares = new_place_shares(
-    ...     a, labels, motions, 0, 0.005, (sweep, tree, SurfaceNormals(sweep, tree, 10)), reach=1.0)
+    ...     a, labels, motions, 0, 0.005, (sweep, tree, SurfaceNormals(sweep, tree, 10)))
     >>> float(shares[2])
     0.0
     """
@@ -120,8 +120,12 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach, whole=
     rows = members[unexplained]
     group = labels[rows]
     moved = np.einsum("nij,nj->ni", rotations[group], a[rows]) + translations[group]
-    distance, landing = tree.query(moved, distance_upper_bound=reach)
-    arrived = np.isfinite(distance)
+    if reach is None:
+        ratio, landing, _ = _spacing_ratio(moved, tree, sweep, normals)
+        arrived = ratio <= _UNEXPLAINED
+    else:
+        distance, landing = tree.query(moved, distance_upper_bound=reach)
+        arrived = np.isfinite(distance)
     rows, group, landing = rows[arrived], group[arrived], landing[arrived]
     new = np.zeros(len(rows), dtype=bool)
     if len(rows):
