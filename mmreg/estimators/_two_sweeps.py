@@ -39,6 +39,7 @@ from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_swe
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
 from mmreg.sweeps._islands import voxel_islands
+from mmreg.sweeps._new_places import MIN_NEW_PLACE, new_place_shares
 from mmreg.sweeps._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
 
 __all__ = ["SweepRegistration"]
@@ -137,7 +138,7 @@ def _check_timing(times, sweep_times, interval, n, m):
     return _check_times(times, n, "times"), _check_times(sweep_times, m, "sweep_times"), interval
 
 
-def _join_slides(a, labels, motions, static, sigma, target):
+def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     """The static world takes back every cluster that only slides along its own surfaces.
 
     A planar patch (a wall, a kerb, a strip of road) constrains only motion along its
@@ -150,11 +151,16 @@ def _join_slides(a, labels, motions, static, sigma, target):
     the static world: it joins it, with the static world's motion. So does a cluster
     whose motion moves its points (median) by less than half the second sweep's sampling
     spacing where they land (``target``: the second sweep, its cKDTree and its
-    SurfaceNormals): no sweep can show such a motion, whatever the noise.
+    SurfaceNormals): no sweep can show such a motion, whatever the noise. And so does
+    a cluster that its motion shows at a new place with fewer than a tenth of its
+    points (:mod:`mmreg.sweeps._new_places`): a pole or a wall slid up or down along
+    itself lands on surfaces the first sweep held already.
 
-    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; returns the
-    labels, the same arrays without the joined clusters, and the static world's new
-    index.
+    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; ``reach``:
+    the ICP's gate with capture times, else None; ``whole``:
+    both sweeps with their ground, for the new places (see
+    :func:`mmreg.sweeps._new_places.new_place_shares`); returns the labels, the same
+    arrays without the joined clusters, and the static world's new index.
     """
     rotations, translations = motions[:2]
     others = np.flatnonzero((labels >= 0) & (labels != static))
@@ -174,8 +180,13 @@ def _join_slides(a, labels, motions, static, sigma, target):
     _, _, spacing = _spacing_ratio(moved, tree, sweep, sweep_normals)
     departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
+    # A cluster whose motion shows none of it at a new place slid onto static surfaces.
+    shares = new_place_shares(
+        a, labels, motions[:2], static, sigma, target, reach=reach, whole=whole
+    )
+    nowhere = shares < MIN_NEW_PLACE
     slides = np.bincount(group, minlength=n_clusters) > 0
-    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen
+    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere
     if not slides.any():
         return labels, motions, static
     kept = ~slides
@@ -254,12 +265,16 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       explained, and mmreg's moving rule; :mod:`mmreg.sweeps._island_motions`). Small objects
       that move a few sampling spacings (a pedestrian beside a wall) stay within that
       margin; they are found point by point among the islands that keep the ego
-      motion (the points the ego motion leaves far from the second sweep, aligned by
-      ICP; kept when they land where the first sweep had nothing;
+      motion (the points the ego motion leaves far from the second sweep or off its
+      surfaces, aligned by ICP; kept when they land where the first sweep explains
+      nothing;
       :mod:`mmreg.sweeps._slow_movers`) and become islands of their own. The islands'
       motions become putative correspondences for ``estimator``; the static world keeps
       the ego motion and the other clusters are refined as above. This repeats while the
       labels change (at most ``max_rounds`` times): a multi-body ICP around the EM.
+      A cluster that only slides along its own surfaces, or that its motion shows at a
+      new place with under a tenth of its points (:mod:`mmreg.sweeps._new_places`),
+      then rejoins the static world.
 
     Parameters
     ----------
@@ -1246,7 +1261,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             return self._raw(a, context, (ego, probe), sigma)
         ground, sweep_ground = masks
         self.ground_mask_, self.sweep_ground_mask_ = ground, sweep_ground
-        sweep, _, _, rng, timing = context
+        sweep, whole_tree, whole_normals, rng, timing = context
         off, sweep_off = ~ground, ~sweep_ground
         if off.sum() < 3 or sweep_off.sum() < _MIN_SWEEP_POINTS:
             raise ValueError(
@@ -1265,8 +1280,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             rng,
             timing,
         )
+        # The new places are judged against both sweeps whole: the two masks of the
+        # ground differ at objects' feet, where a surface left in one sweep only would
+        # read as new.
+        whole = (a, (sweep, whole_tree, whole_normals))
         labels_off, estimator, rotations, translations, scales, sigmas, static = self._raw(
-            a[off], context, (ego, probe), sigma
+            a[off], context, (ego, probe), sigma, whole
         )
         if static < 0:  # the ground is the static world's first member
             static = len(rotations)
@@ -1278,7 +1297,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         labels[off] = labels_off
         return labels, estimator, rotations, translations, scales, sigmas, static
 
-    def _raw(self, a, context, egos, sigma):
+    def _raw(self, a, context, egos, sigma, whole=None):
         # ``egos``: the ego motion reported (the static world's), and the one the islands
         # are tested and the clusters started at (see _ego_motion).
         ego, probe = egos
@@ -1321,6 +1340,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 static,
                 sigma,
                 (sweep, tree, normals),
+                # Motions fitted to deskewed points put the raw ones near their view.
+                None if context[4] is None else self.max_distance_,
+                whole,
             )
         return labels, estimator, rotations, translations, scales, sigmas, static
 
