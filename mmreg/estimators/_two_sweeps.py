@@ -29,7 +29,7 @@ from mmreg._array.grouping import group_bounds
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
 from mmreg._validation import check_coordinate_range, check_ego_motion, invalid_rows
-from mmreg.sweeps._ambiguous_shapes import is_line, slides_in_plane
+from mmreg.sweeps._ambiguous_shapes import ACROSS, is_line, slides_in_plane
 from mmreg.sweeps._deskew import deskew, relative_motions
 from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
 from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
@@ -185,6 +185,14 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
         a, labels, motions[:2], static, sigma, target, reach=reach, whole=whole
     )
     nowhere = shares < MIN_NEW_PLACE
+    # Only a shape that can slide along itself (a line of points; surfaces whose normals
+    # lie across the motion: a wall, a building's corner): a car seen from behind that
+    # drives on by less than its length lands within its old footprint too (its rear
+    # face among its old roof and sides), but moves across its rear face.
+    squared = np.einsum("ni,ni->n", displacement, displacement)
+    length = np.sqrt(np.bincount(group, weights=squared, minlength=n_clusters) / counts)
+    along_itself = evidence < ACROSS * length
+    nowhere &= is_line(points, group, n_clusters) | along_itself
     slides = np.bincount(group, minlength=n_clusters) > 0
     slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere
     if not slides.any():

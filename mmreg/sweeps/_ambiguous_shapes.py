@@ -11,13 +11,13 @@ import numpy as np
 
 from mmreg._array.moments import group_moments
 
-__all__ = ["is_line", "slides_in_plane"]
+__all__ = ["ACROSS", "is_line", "slides_in_plane"]
 
 # Flat: the smallest spread (variance) of the island's points under this share of the
 # middle one; a line: the middle one under this share of the largest.
 _FLATNESS = 0.05
 # Along the plane: the motion's component across it is under this share of its length.
-_ACROSS = 0.5
+ACROSS = 0.5
 
 
 def slides_in_plane(points, groups, n_groups, motions, ego):
@@ -62,7 +62,7 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     own = np.einsum("kij,kj->ki", rotations, centre) + translations
     displacement = own - (centre @ ego[0].T + ego[1])
     across = np.abs(np.einsum("ki,ki->k", displacement, normal))
-    return flat & (across < _ACROSS * np.linalg.norm(displacement, axis=1))
+    return flat & (across < ACROSS * np.linalg.norm(displacement, axis=1))
 
 
 def is_line(points, groups, n_groups):
