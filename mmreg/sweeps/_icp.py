@@ -28,6 +28,7 @@ from sklearn.utils import check_random_state
 
 # The same median as the command line's motion statistics (the mean of the two middle values).
 from mmreg._array.motion import _group_median
+from mmreg._array.moving_nearest import MovingNearest
 
 __all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
 
@@ -351,19 +352,21 @@ def multi_body_icp(
     # A cluster whose step fell below ``tol`` is done: later iterations leave its points
     # out (hypothesis tests run hundreds of clusters, most of which settle early).
     alive = np.ones(n_clusters, dtype=bool)
+    # Most points move by far less than the gaps between target points after the first
+    # steps: their nearest target point is re-queried only where it may have changed.
+    nearest_of = MovingNearest(tree, len(every_point), float(gate.max()), workers)
+    every_row = np.arange(len(every_point))
     for iteration in range(max_iter + 1):
         final = converged or iteration == max_iter
         if final and not measure and iteration:
             break
         if final or alive.all():
-            points, group = every_point, every_group
+            points, group, row = every_point, every_group, every_row
         else:
             keep = alive[every_group]
-            points, group = every_point[keep], every_group[keep]
+            points, group, row = every_point[keep], every_group[keep], every_row[keep]
         moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
-        distance, nearest = tree.query(
-            moved, distance_upper_bound=float(gate.max()), workers=workers
-        )
+        distance, nearest = nearest_of(moved, row, gate[group])
         matched = distance <= gate[group]
         rows = np.flatnonzero(matched)
         g = group[rows]
