@@ -102,9 +102,9 @@ class SurfaceNormals:
         self.tree = tree
         self.k = min(int(k), len(points))
         self.workers = workers
-        self._normals = np.full((len(points), 3), np.nan)
-        self._variation = np.full(len(points), np.nan)
-        self._flatness = np.full(len(points), np.nan)
+        # One row per point: normal, surface variation, flatness (NaN until computed),
+        # so that a call gathers its rows once.
+        self._table = np.full((len(points), 5), np.nan)
         self._spacing = np.full(len(points), np.nan)
 
     def _missing(self, index, known):
@@ -137,8 +137,10 @@ class SurfaceNormals:
         flatness is ``l_1 / l_2``: 0 on a line.
         """
         index = np.asarray(index, dtype=np.intp)
-        missing = self._missing(index, self._variation)
-        if len(missing):
+        rows = self._table[index]
+        unknown = np.isnan(rows[:, 3])
+        if unknown.any():
+            missing = self._missing(index[unknown], self._table[:, 3])
             distance, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
             near = near.reshape(len(missing), self.k)
             if self.k > 1:  # the nearest other point: the spacing, for free
@@ -147,15 +149,16 @@ class SurfaceNormals:
             hood = hood - hood.mean(axis=1, keepdims=True)
             covariance = np.einsum("nki,nkj->nij", hood, hood)
             values, vectors = np.linalg.eigh(covariance)
-            self._normals[missing] = vectors[:, :, 0]
+            self._table[missing, :3] = vectors[:, :, 0]
             total = values.sum(axis=1)
-            self._variation[missing] = np.where(
+            self._table[missing, 3] = np.where(
                 total > 0, values[:, 0] / np.where(total > 0, total, 1.0), 0.0
             )
-            self._flatness[missing] = np.where(
+            self._table[missing, 4] = np.where(
                 values[:, 2] > 0, values[:, 1] / np.where(values[:, 2] > 0, values[:, 2], 1.0), 0.0
             )
-        return self._normals[index], self._variation[index], self._flatness[index]
+            rows[unknown] = self._table[index[unknown]]
+        return rows[:, :3], rows[:, 3], rows[:, 4]
 
 
 def _group_sums(values, groups, n_groups):
