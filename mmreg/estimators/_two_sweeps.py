@@ -995,6 +995,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                     max_distance=reach * self.max_distance_,
                     max_iter=self.max_icp_iter,
                     tol=_TOL * self.max_distance_,
+                    workers=self._workers(),
                 )
                 rotation, translation = result.rotations, result.translations
             ego = (rotation[0], translation[0])
@@ -1023,6 +1024,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_distance=self.max_distance_,
             max_iter=self.max_icp_iter,
             tol=_TOL * self.max_distance_,
+            workers=self._workers(),
         )
         icp = (result.rotations[0], result.translations[0])
         stride = -(-len(a) // _EGO_RESIDUAL_POINTS)
