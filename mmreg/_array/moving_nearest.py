@@ -45,7 +45,7 @@ class MovingNearest:
     >>> from mmreg._array.moving_nearest import MovingNearest
     >>> target = np.array([[0.0, 0, 0], [1, 0, 0], [5, 0, 0]])
     >>> nearest = MovingNearest(cKDTree(target), 2, bound=2.0)
-    >>> x = np.array([[0.1, 0, 0], [4.0, 0, 0]])
+    >>> x = np.array([[0.1, 0, 0], [3.0, 9.0, 0]])  # the second far from every target point
     >>> nearest(x, np.arange(2))[1].tolist()
     [0, 3]
     >>> nearest(x + 0.01, np.arange(2))[1].tolist()  # the first from its anchor, no query
