@@ -1,9 +1,10 @@
 """Multi-body ICP: every cluster's rigid motion refined on a second point set at once.
 
 Each cluster ``j`` carries a motion ``(R_j, t_j)``; its points ``a_i`` are moved by it,
-matched to their nearest neighbour ``q_i`` in the target (one KD-tree, built once, one
-query per iteration for the points of every cluster), and the motions are updated by one
-Gauss-Newton step of the robust point-to-plane cost
+matched to their nearest neighbour ``q_i`` in the target (one KD-tree, built once; an
+iteration queries it again only for the points whose nearest neighbour may have changed,
+:mod:`mmreg._array.moving_nearest`), and the motions are updated by one Gauss-Newton step
+of the robust point-to-plane cost
 
     sum_i rho( n_i . (R_j a_i + t_j - q_i) / s_j ),
 
