@@ -229,12 +229,12 @@ def _report(rows, stage_rows, args):
             f"{r['small_gicp GICP']:.3f} | {r['KISS-ICP']:.3f} "
             f"| {cli} |"
         )
+    inputs = "; ".join(f"{r['pair']}: {r['cli input']}" for r in rows if "cli input" in r)
     lines += [
         "",
         "`mmreg register A --sweep B -q` end to end (a new process: imports, reading, fit, "
-        "picture, files); input: "
-        + "; ".join(f"{r['pair']}: {r['cli input']}" for r in rows if "cli input" in r)
-        + ".",
+        "picture, files); "
+        + (f"input: {inputs}." if inputs else "not measured in this run (--no-cli)."),
         "",
         "Where one fit's time goes (s; one run, after the timed ones):",
         "",
