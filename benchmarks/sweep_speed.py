@@ -19,7 +19,8 @@ Then where the fit's time goes (one more fit, each stage timed where it is calle
 ``mmreg register`` end to end (a new process each round: imports, reading, the fit,
 the picture and the files; ``--cli``), on the pair's raw files (Argoverse 2 .feather
 sweeps, which carry capture times: the fit deskews) or on .npy copies of its points
-written to a temporary folder.
+written to a temporary folder, and where its time goes (one more run through
+``benchmarks/cli_stages.py``: imports, reading, the fit, the picture, the files).
 
 Times depend on the machine and its load (the shared 2-core machine of the results file
 runs other jobs): compare the ratios, and runs made side by side. Writes
@@ -156,21 +157,26 @@ def pairs(root):
 
 
 def cli_seconds(a, sweep, files, repeats):
-    """Median wall seconds of ``mmreg register A --sweep B`` and of its fit (run.json)."""
+    """Median wall seconds of ``mmreg register A --sweep B`` and of its fit (run.json),
+    and ``{stage: seconds}`` of one more run (``cli_stages.py``: imports apart)."""
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         if files is None:
             files = [folder / "a.npy", folder / "b.npy"]
             np.save(files[0], a)
             np.save(files[1], sweep)
-        command = [sys.executable, "-m", "mmreg.cli", "register", str(files[0])]
-        command += ["--sweep", str(files[1]), "--out", str(folder / "out"), "--overwrite", "-q"]
+        arguments = ["register", str(files[0]), "--sweep", str(files[1])]
+        arguments += ["--out", str(folder / "out"), "--overwrite", "-q"]
         env = os.environ | {"PYTHONPATH": str(ROOT)}
         total, fitted = [], []
         for _ in range(repeats):
+            command = [sys.executable, "-m", "mmreg.cli", *arguments]
             total.append(_timed(subprocess.run, command, env=env, check=True))
             fitted.append(json.loads((folder / "out" / "run.json").read_text())["fit_seconds"])
-        return statistics.median(total), statistics.median(fitted)
+        staged = [sys.executable, str(Path(__file__).parent / "cli_stages.py"), *arguments]
+        lines = subprocess.run(staged, env=env, check=True, capture_output=True, text=True)
+        stages = json.loads(lines.stdout.splitlines()[-1])
+        return statistics.median(total), statistics.median(fitted), stages
 
 
 def main(argv=None):
@@ -195,7 +201,9 @@ def main(argv=None):
         median = {key: statistics.median(values) for key, values in times.items()}
         row = {"pair": name, "n": len(a), "m": len(sweep)} | median
         if args.cli:
-            row["cli"], row["cli fit"] = cli_seconds(a, sweep, files, args.repeats)
+            row["cli"], row["cli fit"], row["cli stages"] = cli_seconds(
+                a, sweep, files, args.repeats
+            )
             row["cli input"] = "the .feather sweeps (deskewed)" if files else ".npy points"
         rows.append(row)
         stage_rows.append((name, stages(a, sweep)))
@@ -235,6 +243,7 @@ def _report(rows, stage_rows, args):
         "`mmreg register A --sweep B -q` end to end (a new process: imports, reading, fit, "
         "picture, files); "
         + (f"input: {inputs}." if inputs else "not measured in this run (--no-cli)."),
+        *_cli_stage_table(rows),
         "",
         "Where one fit's time goes (s; one run, after the timed ones):",
         "",
@@ -247,6 +256,28 @@ def _report(rows, stage_rows, args):
         cells = ["-" if v is None else f"{v:.3f}" for v in values]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _cli_stage_table(rows):
+    """Where ``mmreg register``'s time goes: lines of a table, one column per pair."""
+    staged = [r for r in rows if "cli stages" in r]
+    if not staged:
+        return []
+    lines = [
+        "",
+        "Where `mmreg register`'s time goes (s; one more run, `benchmarks/cli_stages.py`: "
+        "every import counted under imports, wherever it happens; the fit's stages are "
+        "below):",
+        "",
+        "| stage | " + " | ".join(r["pair"] for r in staged) + " |",
+        "|---|" + "---|" * len(staged),
+    ]
+    labels = list(dict.fromkeys(label for r in staged for label in r["cli stages"]))
+    for label in labels:
+        cells = [r["cli stages"].get(label) for r in staged]
+        cells = ["-" if v is None else f"{v:.3f}" for v in cells]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return lines
 
 
 if __name__ == "__main__":

@@ -1,7 +1,6 @@
 """Input checks shared by every estimator: stacked correspondences and label arrays."""
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 __all__ = ["MAX_ABS_COORDINATE", "check_coordinate_range", "check_labels", "compact_labels"]
 __all__ += ["MAX_INCOHERENCE", "NotCorrespondencesError", "check_paired", "invalid_rows"]
@@ -224,6 +223,8 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
     # Medians over evenly spread rows: as good as all of them, and a fraction of the cost.
     sample = np.unique(np.linspace(0, len(a) - 1, min(len(a), _PAIRED_SAMPLE)).astype(np.intp))
     if nearest is None:
+        from scipy.spatial import cKDTree  # here: importing this module stays light
+
         spacing, nearest = cKDTree(a).query(a[sample], k=2)
         spacing, nearest = spacing[:, 1], nearest[:, 1]
     else:

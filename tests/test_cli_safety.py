@@ -399,29 +399,6 @@ def test_no_stray_warnings_in_normal_use(tmp_path, pairs):
     assert (tmp_path / "r3d.png").exists()
 
 
-def test_help_and_version_import_nothing_heavy():
-    """The command line's own modules import numpy, pandas, matplotlib, Open3D lazily."""
-    code = (
-        "import sys, time\n"
-        "import mmreg\n"
-        "before = set(sys.modules)\n"
-        "start = time.perf_counter()\n"
-        "from mmreg.cli import main\n"
-        "try:\n"
-        "    main(['--version'])\n"
-        "except SystemExit:\n"
-        "    pass\n"
-        "print(time.perf_counter() - start)\n"
-        "print(' '.join(sorted(m.split('.')[0] for m in set(sys.modules) - before)))\n"
-    )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert result.returncode == 0, result.stderr
-    seconds, modules = result.stdout.splitlines()[-2:]
-    new = set(modules.split())
-    assert not new & {"open3d", "matplotlib", "pandas", "tqdm", "seaborn", "PIL", "sklearn"}
-    assert float(seconds) < 1.0  # on top of "import mmreg" (about 0.05 s when idle)
-
-
 def test_every_file_the_commands_read_is_checked(tmp_path, result, scene, capsys):
     """Masks, ground truth and a result's X.npy go through the same strict readers."""
     masks = tmp_path / "masks.npz"

@@ -125,8 +125,9 @@ def test_sweep_is_cropped_to_the_range_around_the_sensor():
     fig = plot_sweep(points, labels, motions, range_=10.0, center=(1.0, -2.0))
     ax = fig.axes[0]
     assert ax.get_xlim() == (-9.0, 11.0) and ax.get_ylim() == (-12.0, 8.0)
-    drawn = np.vstack([c.get_offsets() for c in ax.collections])
-    assert len(drawn) < len(points)
+    # The static world is stamped (StampedPoints, an artist), the objects scattered.
+    drawn = np.vstack([c.get_offsets() for c in [*ax.collections, *ax.artists]])
+    assert 0 < len(drawn) < len(points)
     assert np.all(np.abs(drawn - [1.0, -2.0]) <= 10.0)
     # The car (centroid at x = 12.25) is out of view: said so, not listed.
     texts = _legend_texts(fig)

@@ -157,6 +157,13 @@ def show_warning(message, category, filename, lineno, file=None, line=None):
     warn(message)
 
 
+def _shows_a_bar(stream):
+    """Whether tqdm would draw on ``stream`` (its ``disable=None``): unless it says it is
+    not a terminal."""
+    isatty = getattr(stream, "isatty", None)
+    return isatty is None or isatty()
+
+
 class Steps:
     """A tqdm progress bar over named steps, on stderr; hidden when quiet or not a terminal.
 
@@ -165,28 +172,32 @@ class Steps:
     """
 
     def __init__(self, total, *, quiet=False, verbose=False):
-        from tqdm import tqdm
+        self._bar = None
+        if not quiet and _shows_a_bar(sys.stderr):  # tqdm (and its lock) only for a bar
+            from tqdm import tqdm
 
-        self._bar = tqdm(
-            total=total,
-            disable=True if quiet else None,  # None: only on a terminal
-            file=sys.stderr,
-            leave=False,
-            unit="step",
-            bar_format="{desc:<34} {bar:20} {n_fmt}/{total_fmt} [{elapsed}]",
-        )
-        self._announce = bool(verbose) and self._bar.disable
+            self._bar = tqdm(
+                total=total,
+                file=sys.stderr,
+                leave=False,
+                unit="step",
+                bar_format="{desc:<34} {bar:20} {n_fmt}/{total_fmt} [{elapsed}]",
+            )
+        self._announce = bool(verbose) and self._bar is None
 
     @contextlib.contextmanager
     def step(self, description):
         if self._announce:
             print(f"mmreg: {description}", file=sys.stderr, flush=True)
-        self._bar.set_description_str(description)
+        if self._bar is not None:
+            self._bar.set_description_str(description)
         yield
-        self._bar.update(1)
+        if self._bar is not None:
+            self._bar.update(1)
 
     def close(self):
-        self._bar.close()
+        if self._bar is not None:
+            self._bar.close()
 
     def __enter__(self):
         return self

@@ -22,8 +22,6 @@ from pathlib import Path
 from typing import Any
 
 from mmreg._cli._common import CLIError, check_labels, read_result_input, reading
-from mmreg.io._arrays import _load_npz
-from mmreg.io._checks import _check_readable
 
 # The arrays every job file holds (see mmreg.runner).
 _JOB_ARRAYS = ("labels", "rotations", "translations", "flow")
@@ -164,6 +162,9 @@ def _directory_result(folder):
 
 def _job_result(path):
     import numpy as np
+
+    from mmreg.io._arrays import _load_npz
+    from mmreg.io._checks import _check_readable
 
     with reading(path):
         arrays = _load_npz(_check_readable(path, "a job's result"))

@@ -36,8 +36,6 @@ from mmreg._cli._lidar_input import (
     is_sequence,
     read_frames,
 )
-from mmreg._validation import NotCorrespondencesError
-from mmreg.io._correspondences import _read_points
 
 NAME = "register"
 HELP = "find the moving objects, their motions and the outliers in correspondences"
@@ -466,6 +464,8 @@ def _read_sequence_input(args, other):
     if other is None:
         return a
     path = args.target if args.target is not None else args.flow
+    from mmreg.io._correspondences import _read_points
+
     with reading(path):
         values = _read_points(path, "the b-points" if args.target else "the flow")
     if len(values) != len(a):
@@ -779,6 +779,8 @@ def register(
 
     Returns ``(estimator, summary, fit_seconds, n_initial_clusters)``.
     """
+    from mmreg._validation import NotCorrespondencesError
+
     start = time.perf_counter()
     init_used = init_name(args, X)
     sweep = read_sweep(args)

@@ -30,7 +30,7 @@ from mmreg._array.moments import Moments, group_moments
 from mmreg._array.neighbors import NeighbourTable, touching_groups
 from mmreg.em._hypotheses import fit_minimal_samples, minimal_sample_size
 from mmreg.em._likelihood import morton_order
-from mmreg.em._static_world import agrees_with_ego_motion, widest_cluster
+from mmreg.em._static_world import agrees_with_ego_motion, spanning_union, widest_cluster
 
 __all__ = [
     "ClusterModels",
@@ -920,8 +920,11 @@ def merge_static_world(
     clustered correspondences. In a crowded scene no motion does: the static world is
     then the cluster that spans the scene, whatever its share
     (:func:`~mmreg.em._static_world.widest_cluster`: the background reaches
-    across the view, an object does not), or none; a cluster that spans the scene also
-    wins over a majority that does not (an object filling half of a camera's view).
+    across the view, an object does not), or, when the background lies in pieces none of
+    which spans it alone, the cluster whose union with the pieces it would gather spans it
+    from behind the others (:func:`~mmreg.em._static_world.spanning_union`), or none;
+    a cluster that spans the scene also wins over a majority that does not (an object
+    filling half of a camera's view).
     With ``ego_motion`` ``(R, t)`` given, it is the largest cluster that moves with it
     (within ``min_motion`` beyond its scatter), whatever its share or spread, or none.
     ``geometry``: the clusters' a-points' :class:`~mmreg._array.moments.Moments`, every row
@@ -963,6 +966,17 @@ def merge_static_world(
             slow = ~agree & (motion_beyond_scatter(models, static, others) < min_motion)
         return others[agree], others[slow]
 
+    def gathered_by_each():
+        # gathered(j) of every cluster j at once: row j marks j and what it would gather.
+        present = np.flatnonzero(sizes > 0)
+        i, j = np.repeat(present, len(present)), np.tile(present, len(present))
+        i, j = i[i != j], j[i != j]
+        with_it = _merge_ratio(models, np.column_stack([i, j]), d) < 1.0
+        with_it |= motion_beyond_scatter(models, i, j) < min_motion
+        members = np.eye(k, dtype=bool)
+        members[i[with_it], j[with_it]] = True
+        return members
+
     if ego_motion is not None:
         present = np.flatnonzero(sizes > 0)
         gap = _motion_from(models.take(present), ego_motion)
@@ -985,6 +999,11 @@ def merge_static_world(
             models.moments if geometry is None else geometry, np.flatnonzero(sizes > 0)
         )
         if not majority or (spans >= 0 and spans not in {static, *joined, *slow}):
+            if spans < 0:
+                # A background in pieces, none spanning the scene alone.
+                spans = spanning_union(
+                    models.moments if geometry is None else geometry, gathered_by_each()
+                )
             if spans < 0:
                 return none
             static = spans

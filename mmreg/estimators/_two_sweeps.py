@@ -13,6 +13,7 @@ moving objects. Given the points' capture times,
 the moving clusters are deskewed in the ICP (:mod:`mmreg.sweeps._deskew`).
 """
 
+import copy
 import importlib.util
 from numbers import Integral, Real
 
@@ -29,6 +30,7 @@ from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
 from mmreg._array.point_memo import PointMemo
 from mmreg._validation import check_coordinate_range, check_ego_motion, invalid_rows
+from mmreg.sweeps._ambiguous_shapes import is_line, slides_in_plane
 from mmreg.sweeps._deskew import deskew, relative_motions
 from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
 from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
@@ -66,6 +68,9 @@ _SLIDE_SCALES = 3.0
 _EGO_EXACT_SHARE = 0.75
 # Raw mode: "auto" max_displacement is at least this many times the ego motion's step.
 _TRAFFIC_PER_EGO = 1.5
+# Raw mode, "auto" max_displacement: how many times islands that nothing within the reach
+# explains search again, each time twice as far.
+_WIDENINGS = 1
 # Raw mode, the ego vehicle's body (mmreg.sweeps._ego_body), in units of tau: candidates lie
 # within _BODY_REACH of the sensor (3 m at tau 5; nuScenes' body returns lie within
 # 2.5 m) and match the other sweep within _BODY_MATCH (5 cm) at the same coordinates;
@@ -288,6 +293,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sweeps. ``"auto"``: ``0.6 tau`` (3 m with ``tau=5``: 30 m/s at 10 Hz), or 1.5
         times the length of the ego motion's translation where that is more (other
         traffic moves about as fast as the sensor: 7.5 m for 2 Hz keyframes at 36 km/h).
+        Being a guess, ``"auto"`` is widened where the data ask: islands that neither
+        the ego motion nor any motion within it explains search again twice as far
+        (a slow ego car 0.5 s apart from a car 5 m on). A number is a bound.
     max_rounds : int, default=2
         Raw mode: most rounds of estimator and ICP.
     raw_init : {"islands", "estimator"}, default="islands"
@@ -1047,6 +1055,74 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         islands, n_islands = voxel_islands(a, self.island_radius_, self.min_island_size)
         islands2, n_islands2 = voxel_islands(sweep, self.island_radius_, self.min_island_size)
         at_rest = a @ ego[0].T + ego[1]  # the first sweep where the ego motion puts it
+        inside = np.flatnonzero(islands >= 0)
+        resting = cKDTree(at_rest[inside])
+        search = (a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside)
+        reach = self.max_displacement_
+        moving, rotations, translations, unexplained = self._island_hypotheses(
+            islands, n_islands, search, reach, rng
+        )
+        if self.max_displacement == "auto":
+            # The reach is a guess at the traffic's speed times the sweeps' interval, which
+            # the points do not give: a slow ego car 0.5 s apart leaves a 5 m mover beyond
+            # it. Islands that neither the ego motion nor any motion within the reach
+            # explains search again, alone, twice as far (a copy of the random state, so
+            # that the steps after see the same draws whether or not one searches).
+            wide_rng = copy.deepcopy(rng)
+            for _ in range(_WIDENINGS):
+                lost = ~moving & unexplained
+                if not lost.any():
+                    break
+                reach *= 2.0
+                number = np.cumsum(lost) - 1
+                subset = np.where(islands >= 0, np.where(lost, number, -1)[islands], -1)
+                found, sub_r, sub_t, sub_unexplained = self._island_hypotheses(
+                    subset, int(lost.sum()), search, reach, wide_rng
+                )
+                where = np.flatnonzero(lost)
+                # Twice as far, a flat patch finds more of its plane to slide along and
+                # a pole more poles to match.
+                found &= ~slides_in_plane(a, subset, len(where), (sub_r, sub_t), ego)
+                found &= ~is_line(a, subset, len(where))
+                moving[where] = found
+                rotations[where[found]], translations[where[found]] = sub_r[found], sub_t[found]
+                unexplained[where] = sub_unexplained
+        # Objects that move by a few sampling spacings stay within the ego motion's
+        # band and often share an island with a static structure: found point by point
+        # among the points no moving island holds, they become islands of their own.
+        slow, slow_rotations, slow_translations = slow_movers(
+            a,
+            (islands < 0) | ~moving[np.maximum(islands, 0)],
+            ego,
+            sigma,
+            (sweep, tree, normals),
+            resting,
+            cell=0.5 * self.island_radius_,
+            min_size=self.min_island_size,
+            max_points=2 * _HYPOTHESIS_POINTS,
+            max_distance=self.max_distance_,
+            max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
+            tol=_TOL * self.max_distance_,
+            random_state=rng,
+            moved=at_rest,
+        )
+        if len(slow_rotations):
+            islands = np.where(slow >= 0, n_islands + slow, islands)
+            rotations = np.concatenate([rotations, slow_rotations])
+            translations = np.concatenate([translations, slow_translations])
+            moving = np.concatenate([moving, np.ones(len(slow_rotations), dtype=bool)])
+        return islands, rotations, translations, moving
+
+    def _island_hypotheses(self, islands, n_islands, search, reach, rng):
+        """Each island's motion hypotheses within ``reach``, and the one it keeps.
+
+        ``search`` holds what every search shares (the sweeps, the second sweep's islands,
+        the ego motion and its scale, the first sweep at rest and its tree). Returns
+        whether each island moves, its rotation and translation (the ego motion's where
+        it does not), and whether the ego motion leaves most of its points unexplained.
+        """
+        a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside = search
+        _, tree, normals, _, _ = context
         starts = translation_starts(
             a,
             islands,
@@ -1055,7 +1131,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             islands2,
             n_islands2,
             ego,
-            max_displacement=self.max_displacement_,
+            max_displacement=reach,
             bin_size=_BIN * self.max_distance_,
             random_state=rng,
             moved=at_rest,
@@ -1085,9 +1161,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             workers=self._workers(),
         )
         motions = (result.rotations, result.translations)
-        inside = np.flatnonzero(islands >= 0)
-        resting = cKDTree(at_rest[inside])
-        moving, pick = choose_island_motions(
+        moving, pick, unexplained = choose_island_motions(
             a[chosen],
             islands[chosen],
             n_islands,
@@ -1098,6 +1172,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             (sweep, tree, normals),
             (resting, islands[inside], 0.5 * self.island_radius_),
             max_distance=self.max_distance_,
+            with_unexplained=True,
         )
         rotations = np.broadcast_to(ego[0], (n_islands, 3, 3)).copy()
         translations = np.broadcast_to(ego[1], (n_islands, 3)).copy()
@@ -1117,31 +1192,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 normals,
             )
             rotations[~moving], translations[~moving] = ego
-        # Objects that move by a few sampling spacings stay within the ego motion's
-        # band and often share an island with a static structure: found point by point
-        # among the points no moving island holds, they become islands of their own.
-        slow, slow_rotations, slow_translations = slow_movers(
-            a,
-            (islands < 0) | ~moving[np.maximum(islands, 0)],
-            ego,
-            sigma,
-            (sweep, tree, normals),
-            resting,
-            cell=0.5 * self.island_radius_,
-            min_size=self.min_island_size,
-            max_points=2 * _HYPOTHESIS_POINTS,
-            max_distance=self.max_distance_,
-            max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
-            tol=_TOL * self.max_distance_,
-            random_state=rng,
-            moved=at_rest,
-        )
-        if len(slow_rotations):
-            islands = np.where(slow >= 0, n_islands + slow, islands)
-            rotations = np.concatenate([rotations, slow_rotations])
-            translations = np.concatenate([translations, slow_translations])
-            moving = np.concatenate([moving, np.ones(len(slow_rotations), dtype=bool)])
-        return islands, rotations, translations, moving
+        return moving, rotations, translations, unexplained
 
     def _resolve_lengths(self):
         """The lengths in use: as given, or ``"auto"`` from the estimator's ``tau``."""

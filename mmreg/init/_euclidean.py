@@ -1046,8 +1046,52 @@ def euclidean_clustering(
     >>> labels
     array([ 0,  0,  0,  1,  1, -1])
     """
+    labels, radius, short = euclidean_labels(
+        points,
+        n_clusters=n_clusters,
+        radius=radius,
+        max_radius=max_radius,
+        min_cluster_size=min_cluster_size,
+        n_neighbors=n_neighbors,
+        n_jobs=n_jobs,
+        neighbours=neighbours,
+    )
+    if short is not None:
+        warnings.warn(
+            f"No radius tried gives n_clusters={n_clusters} clusters of at least "
+            f"min_cluster_size={min_cluster_size} points; using the radius {radius:.6g}, "
+            f"which gives the most ({short}). Lower n_clusters or min_cluster_size.",
+            UserWarning,
+            stacklevel=user_stacklevel(),
+        )
+    return labels, radius
+
+
+def euclidean_labels(
+    points,
+    *,
+    n_clusters,
+    radius,
+    max_radius,
+    min_cluster_size,
+    n_neighbors,
+    n_jobs,
+    neighbours=None,
+):
+    """:func:`euclidean_clustering` without its warning, for callers to whom
+    ``n_clusters`` is an upper bound rather than a request.
+
+    Returns
+    -------
+    labels : ndarray of shape (n,)
+    radius : float
+    short : int or None
+        The number of large clusters found when no radius tried reaches ``n_clusters``
+        (then ``radius`` is the one giving the most); None when one does.
+    """
     points = np.asarray(points, dtype=float)
     n = len(points)
+    short = None
     if radius is not None:
         _, components = connected_labels(points, radius)
     elif n <= 1:
@@ -1063,17 +1107,10 @@ def euclidean_clustering(
             radius, reached = max_radius, True
             components = tau_components(points, max_radius)[1]
         if not reached:
-            found = int(np.count_nonzero(np.bincount(components) >= min_cluster_size))
-            warnings.warn(
-                f"No radius tried gives n_clusters={n_clusters} clusters of at least "
-                f"min_cluster_size={min_cluster_size} points; using the radius {radius:.6g}, "
-                f"which gives the most ({found}). Lower n_clusters or min_cluster_size.",
-                UserWarning,
-                stacklevel=user_stacklevel(),
-            )
+            short = int(np.count_nonzero(np.bincount(components) >= min_cluster_size))
     sizes = np.bincount(components, minlength=1)
     components = np.where(sizes[components] >= min_cluster_size, components, -1)
-    return number_by_first_point(components)[0], float(radius)
+    return number_by_first_point(components)[0], float(radius), short
 
 
 class EuclideanClustering(PartitionInitializer):

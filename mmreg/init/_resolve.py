@@ -1,7 +1,5 @@
 """Turn the ``init`` parameter of a registration estimator into initial labels."""
 
-import warnings
-
 import numpy as np
 from sklearn.base import clone
 from sklearn.utils._param_validation import HasMethods, StrOptions
@@ -67,16 +65,6 @@ def initial_labels(init, X, *, random_state=None, n_jobs=None, tau=None, neighbo
     -------
     labels : ndarray of shape (n,)
     """
-    if isinstance(init, str):
-        # The shortcut's 100 clusters are an upper bound the user never asked for: a small
-        # scene that holds fewer is clustered as finely as it allows, without a warning.
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message="No radius tried gives")
-            return _labels_from(init, X, random_state, n_jobs, tau, neighbours)
-    return _labels_from(init, X, random_state, n_jobs, tau, neighbours)
-
-
-def _labels_from(init, X, random_state, n_jobs, tau, neighbours):
     n, n_columns = X.shape
     if isinstance(init, str):
         makers = _shortcuts(tau)
@@ -86,14 +74,15 @@ def _labels_from(init, X, random_state, n_jobs, tau, neighbours):
                 "a clusterer with fit_predict, or an array of initial labels."
             )
         init = makers[init]()
-        from mmreg.init import EuclideanClustering, euclidean_clustering
+        from mmreg.init import EuclideanClustering
+        from mmreg.init._euclidean import euclidean_labels
 
-        if neighbours is not None and isinstance(init, EuclideanClustering):
-            # The same clusters as its fit, from the neighbours the caller has listed.
+        if isinstance(init, EuclideanClustering):
+            # The same clusters as its fit, from the neighbours the caller may have listed.
+            # The shortcut's 100 clusters are an upper bound the user never asked for: a
+            # small scene that holds fewer is clustered as finely as it allows, unwarned.
             params = init.get_params() | {"n_jobs": n_jobs}
-            labels, _ = euclidean_clustering(
-                X[:, : n_columns // 2], **params, neighbours=neighbours
-            )
+            labels, _, _ = euclidean_labels(X[:, : n_columns // 2], **params, neighbours=neighbours)
             return check_labels(labels, n, name="labels from init")
     if hasattr(init, "fit_predict"):
         if isinstance(init, type):

@@ -63,21 +63,33 @@ damaged files):
   the number of rows by one. Values that become NaN or infinite are always an error.
 """
 
-from mmreg.io._atomic import atomic_write
-from mmreg.io._correspondences import read_correspondences, write_correspondences
-from mmreg.io._labels import read_labels, read_times, write_labels
-from mmreg.io._motions import read_motions, write_motions
-from mmreg.io._point_clouds import read_point_cloud, write_point_cloud
+import importlib
 
-__all__ = [
-    "atomic_write",
-    "read_correspondences",
-    "read_labels",
-    "read_motions",
-    "read_point_cloud",
-    "read_times",
-    "write_correspondences",
-    "write_labels",
-    "write_motions",
-    "write_point_cloud",
-]
+# Each public name and the module that holds it, imported on first use (PEP 562): the
+# command line imports mmreg.io's small helpers without paying for every reader.
+_LAZY = {
+    "atomic_write": "mmreg.io._atomic",
+    "read_correspondences": "mmreg.io._correspondences",
+    "read_labels": "mmreg.io._labels",
+    "read_motions": "mmreg.io._motions",
+    "read_point_cloud": "mmreg.io._point_clouds",
+    "read_times": "mmreg.io._labels",
+    "write_correspondences": "mmreg.io._correspondences",
+    "write_labels": "mmreg.io._labels",
+    "write_motions": "mmreg.io._motions",
+    "write_point_cloud": "mmreg.io._point_clouds",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'mmreg.io' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted({*globals(), *__all__})

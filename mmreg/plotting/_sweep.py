@@ -59,6 +59,45 @@ def _static_greys(z):
     return np.repeat(grey[:, np.newaxis], 3, axis=1)
 
 
+def _draw_static(ax, points, diameter):
+    """The static points in greys by height, the higher drawn over the lower (the tops
+    seen from above), each grey an 8-bit level so that a level is drawn at once."""
+    from mmreg.plotting._stamped import StampedPoints
+
+    levels = np.round(_static_greys(points[:, 2])[:, 0] * 255).astype(np.int64)
+    # Darker is higher: the levels from light to dark are the painter's order.
+    palette, index = np.unique(-levels, return_inverse=True)
+    greys = -palette / 255
+    ax.add_artist(
+        StampedPoints(
+            points[:, :2],
+            index,
+            np.repeat(greys[:, np.newaxis], 3, axis=1),
+            diameter,
+            rasterized=True,
+            zorder=1,
+        )
+    )
+
+
+def _draw_outliers(ax, points, diameter):
+    """The outliers as black crosses, over the static world."""
+    from mmreg.plotting._stamped import StampedPoints
+
+    ax.add_artist(
+        StampedPoints(
+            points[:, :2],
+            np.zeros(len(points), dtype=np.int64),
+            [(0.0, 0.0, 0.0)],
+            2.5 * diameter,
+            marker="x",
+            linewidth=0.5,
+            rasterized=True,
+            zorder=2,
+        )
+    )
+
+
 def _sweep_axes(ax):
     if ax is not None:
         return ax
@@ -221,26 +260,10 @@ def plot_sweep(
         rng = np.random.default_rng(random_state)
         static = np.sort(rng.choice(static, max_points, replace=False))
     diameter = _sweep_layout.marker_diameter(points[static], ppm)
-    static = static[np.argsort(points[static, 2], kind="stable")]  # the tops seen from above
-    ax.scatter(
-        *points[static, :2].T,
-        c=_static_greys(points[static, 2]),
-        s=diameter**2,
-        linewidths=0,
-        rasterized=True,
-        zorder=1,
-    )
+    _draw_static(ax, points[static], diameter)
     outliers = np.flatnonzero(window & (labels < 0))
     if len(outliers):
-        ax.scatter(
-            *points[outliers, :2].T,
-            color="black",
-            s=(2.5 * diameter) ** 2,
-            marker="x",
-            linewidths=0.5,
-            rasterized=True,
-            zorder=2,
-        )
+        _draw_outliers(ax, points[outliers], diameter)
     # One round factor for every arrow, from their lengths seen from above.
     scale = _sweep_layout.arrow_scale(
         [np.linalg.norm(d[:2]) for d in displacement.values()], 2 * range_

@@ -204,7 +204,18 @@ def point_costs(moved, target, *, max_distance, scale):
 
 
 def choose_island_motions(
-    points, groups, n_islands, ego, motions, valid, scale, target, claims, *, max_distance
+    points,
+    groups,
+    n_islands,
+    ego,
+    motions,
+    valid,
+    scale,
+    target,
+    claims,
+    *,
+    max_distance,
+    with_unexplained=False,
 ):
     """Which islands move, and which of their ICP results they keep.
 
@@ -232,6 +243,8 @@ def choose_island_motions(
         the ego motion, their islands, and the distance within which a point of the
         second sweep is the static view of one of them.
     max_distance : float
+    with_unexplained : bool, default=False
+        Whether to return ``unexplained`` too.
 
     Returns
     -------
@@ -239,6 +252,9 @@ def choose_island_motions(
     pick : ndarray of shape (n_islands,)
         Index into ``motions`` of each island's best alternative (meaningful where
         ``moving``).
+    unexplained : ndarray of bool, shape (n_islands,)
+        Whether the ego motion leaves most of the island's points unexplained (cost at
+        the cap); only with ``with_unexplained``.
     """
     rotations, translations = motions
     n_starts = valid.shape[1]
@@ -297,4 +313,7 @@ def choose_island_motions(
     score = np.where(eligible, gain.reshape(n_islands, n_starts), -np.inf)
     best = np.argmax(score, axis=1)
     moving = eligible.any(axis=1)
-    return moving, np.arange(n_islands) * n_starts + best
+    pick = np.arange(n_islands) * n_starts + best
+    if with_unexplained:
+        return moving, pick, 2 * static_inliers < sizes
+    return moving, pick

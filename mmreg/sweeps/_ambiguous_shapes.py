@@ -1,0 +1,93 @@
+"""Raw sweeps: islands whose shape cannot tell a far motion from another match.
+
+A flat island (a patch of road, a wall) fits its second view wherever that view
+continues in the plane: a motion within the plane is not evidence that it moved. A
+flat piece of a moving object still counts when its motion has a clear component
+across the plane (the rear of a car driving away). A thin line of points (a pole, a
+post) fits any other pole of a street as well as its own second view.
+"""
+
+import numpy as np
+
+from mmreg._array.moments import group_moments
+
+__all__ = ["is_line", "slides_in_plane"]
+
+# Flat: the smallest spread (variance) of the island's points under this share of the
+# middle one; a line: the middle one under this share of the largest.
+_FLATNESS = 0.05
+# Along the plane: the motion's component across it is under this share of its length.
+_ACROSS = 0.5
+
+
+def slides_in_plane(points, groups, n_groups, motions, ego):
+    """Whether each group is flat and its motion, relative to the ego motion, lies in it.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+    groups : ndarray of shape (n,)
+        Group of every point in ``0..n_groups-1`` (negative: none).
+    n_groups : int
+    motions : tuple of ndarray
+        ``(rotations, translations)``, one per group.
+    ego : tuple of ndarray
+        ``(R, t)`` of the ego motion.
+
+    Returns
+    -------
+    slides : ndarray of bool, shape (n_groups,)
+
+    Examples
+    --------
+    A flat patch moved 3 m within its plane slides; moved across it, it does not.
+
+    >>> import numpy as np
+    >>> from mmreg.sweeps._ambiguous_shapes import slides_in_plane
+    >>> rng = np.random.default_rng(0)
+    >>> patch = np.c_[rng.uniform(0, 2, (100, 2)), np.zeros(100)]
+    >>> rotations = np.stack([np.eye(3)] * 2)
+    >>> translations = np.array([[3.0, 0, 0], [0, 0, 3.0]])
+    >>> groups = np.r_[np.zeros(100, int), np.ones(100, int)]
+    >>> ego = (np.eye(3), np.zeros(3))
+    >>> slides_in_plane(np.vstack([patch, patch]), groups, 2, (rotations, translations), ego)
+    array([ True, False])
+    """
+    moments = group_moments(points, points, groups, n_groups)
+    spread, axes = np.linalg.eigh(moments.cross)
+    flat = spread[:, 0] < _FLATNESS * spread[:, 1]
+    normal = axes[:, :, 0] @ ego[0].T  # where the ego motion turns the plane
+    rotations, translations = motions
+    centre = moments.mean_a
+    own = np.einsum("kij,kj->ki", rotations, centre) + translations
+    displacement = own - (centre @ ego[0].T + ego[1])
+    across = np.abs(np.einsum("ki,ki->k", displacement, normal))
+    return flat & (across < _ACROSS * np.linalg.norm(displacement, axis=1))
+
+
+def is_line(points, groups, n_groups):
+    """Whether each group's points lie along a line (the middle spread is small).
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+    groups : ndarray of shape (n,)
+        Group of every point in ``0..n_groups-1`` (negative: none).
+    n_groups : int
+
+    Returns
+    -------
+    line : ndarray of bool, shape (n_groups,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.sweeps._ambiguous_shapes import is_line
+    >>> rng = np.random.default_rng(0)
+    >>> pole = np.c_[rng.normal(0, 0.03, (50, 2)), rng.uniform(0, 4, 50)]
+    >>> box = rng.uniform(0, 1, (50, 3))
+    >>> is_line(np.vstack([pole, box]), np.repeat([0, 1], 50), 2)
+    array([ True, False])
+    """
+    spread = np.linalg.eigvalsh(group_moments(points, points, groups, n_groups).cross)
+    return spread[:, 1] < _FLATNESS * spread[:, 2]
