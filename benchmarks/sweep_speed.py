@@ -62,7 +62,7 @@ STAGES = [
     ("ego motion (ICP)", _REGISTRATION, "_ego_motion", None),
     ("islands", two_sweeps, "voxel_islands", None),
     ("translation starts", two_sweeps, "translation_starts", None),
-    ("island hypotheses (ICP)", two_sweeps, "multi_body_icp", "_island_motions"),
+    ("island hypotheses (ICP)", two_sweeps, "multi_body_icp", "_island_hypotheses"),
     ("choosing island motions", two_sweeps, "choose_island_motions", None),
     ("slow movers", two_sweeps, "slow_movers", None),
     ("EM (2 rounds)", _multi_model_registration.MultiModelRegistration, "fit", None),
