@@ -158,7 +158,7 @@ def sweep_registration(a, sweep):
     est._resolve_lengths()  # fit's first step: max_distance_ and the other lengths
     tree = cKDTree(sweep)
     context = (sweep, tree, SurfaceNormals(sweep, tree, 10), np.random.RandomState(0), None)
-    (rotation, translation), _ = est._ego_motion(a, context)
+    (rotation, translation), _, _ = est._ego_motion(a, context)  # (motion, ICP motion, scale)
     return _matrix(rotation, translation)
 
 

@@ -1,5 +1,6 @@
 """Classification-EM multi-model registration: the robust default and the paper's Algorithm 1."""
 
+import functools
 from numbers import Integral, Real
 
 import numpy as np
@@ -578,15 +579,17 @@ class MultiModelRegistration(BaseRegistration):
         """:meth:`fit` on the valid rows."""
         workers = self._workers()
         all_a, all_b, n = a, b, len(X)
-        rows = self._fitted_rows(a)
+        # SweepRegistration's rounds fit the same a-points: their sample and neighbour
+        # table are computed once (a PointMemo it hands over; None: computed here).
+        memo = vars(self).pop("_point_memo", None)
+        rows = self._fitted_rows(a, memo)
         if rows is not None:
             X, a, b = X[rows], a[rows], b[rows]
         # The robust variants' neighbour table, listed once for the initial clusters too.
-        neighbours = (
-            NeighbourTable(a, workers=workers)
-            if self.variant != "paper" and reads_neighbours(self.skip_steps)
-            else None
-        )
+        neighbours = None
+        if self.variant != "paper" and reads_neighbours(self.skip_steps):
+            table = functools.partial(NeighbourTable, a, workers=workers)
+            neighbours = table() if memo is None else memo.get(("table", workers), a, table)
         # Before any warning about tau: two sweeps stacked row by row are no input at all.
         known = neighbours is not None and neighbours.k > 1
         check_paired(
@@ -749,13 +752,14 @@ class MultiModelRegistration(BaseRegistration):
                 ScaleWarning,
             )
 
-    def _fitted_rows(self, a):
+    def _fitted_rows(self, a, memo=None):
         """The rows the loop fits: one per voxel of ``voxel_size``, None for all; sets
         ``voxel_size_``."""
         side, rows = self.voxel_size, None
         if side == "auto":
             if self.variant != "paper" and len(a) > _AUTO_SAMPLE_ABOVE:
-                side, rows = voxel_sample(a, _AUTO_SAMPLE_VOXELS)
+                sample = functools.partial(voxel_sample, a, _AUTO_SAMPLE_VOXELS)
+                side, rows = sample() if memo is None else memo.get("sample", a, sample)
             else:
                 side = None
         elif side is not None:

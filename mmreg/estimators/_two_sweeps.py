@@ -28,6 +28,7 @@ from mmreg._array.flow import rigid_flow
 from mmreg._array.grouping import group_bounds
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
+from mmreg._array.point_memo import PointMemo
 from mmreg._validation import check_coordinate_range, check_ego_motion, invalid_rows
 from mmreg.sweeps._ambiguous_shapes import ACROSS, is_line, slides_in_plane
 from mmreg.sweeps._deskew import deskew, relative_motions
@@ -1025,6 +1026,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                     max_distance=reach * self.max_distance_,
                     max_iter=self.max_icp_iter,
                     tol=_TOL * self.max_distance_,
+                    workers=self._workers(),
                 )
                 rotation, translation = result.rotations, result.translations
             ego = (rotation[0], translation[0])
@@ -1053,6 +1055,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             max_distance=self.max_distance_,
             max_iter=self.max_icp_iter,
             tol=_TOL * self.max_distance_,
+            workers=self._workers(),
         )
         icp = (result.rotations[0], result.translations[0])
         stride = -(-len(a) // _EGO_RESIDUAL_POINTS)
@@ -1318,9 +1321,15 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         )
         labels = islands + 1
         previous = None
+        from mmreg.estimators._multi_model_registration import MultiModelRegistration
+
+        memo = PointMemo()  # the rounds fit the same a-points: one sample, one table
         for round_ in range(1, self.max_rounds + 1):
             X = np.hstack([a, rigid_flow(a, labels, *motions) + a])
-            estimator = self._make_estimator(rng, init=labels).fit(X)
+            estimator = self._make_estimator(rng, init=labels)
+            if isinstance(estimator, MultiModelRegistration):
+                estimator._point_memo = memo
+            estimator = estimator.fit(X)
             labels, rotations, translations, static, _ = self._clusters(estimator, X)
             # The static world keeps the ego motion: its ICP used the whole sweep, and
             # on real sweeps one fitted to the static cluster alone was worse (static EPE

@@ -1,9 +1,10 @@
 """Multi-body ICP: every cluster's rigid motion refined on a second point set at once.
 
 Each cluster ``j`` carries a motion ``(R_j, t_j)``; its points ``a_i`` are moved by it,
-matched to their nearest neighbour ``q_i`` in the target (one KD-tree, built once, one
-query per iteration for the points of every cluster), and the motions are updated by one
-Gauss-Newton step of the robust point-to-plane cost
+matched to their nearest neighbour ``q_i`` in the target (one KD-tree, built once; an
+iteration queries it again only for the points whose nearest neighbour may have changed,
+:mod:`mmreg._array.moving_nearest`), and the motions are updated by one Gauss-Newton step
+of the robust point-to-plane cost
 
     sum_i rho( n_i . (R_j a_i + t_j - q_i) / s_j ),
 
@@ -28,6 +29,7 @@ from sklearn.utils import check_random_state
 
 # The same median as the command line's motion statistics (the mean of the two middle values).
 from mmreg._array.motion import _group_median
+from mmreg._array.moving_nearest import MovingNearest
 
 __all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
 
@@ -101,9 +103,9 @@ class SurfaceNormals:
         self.tree = tree
         self.k = min(int(k), len(points))
         self.workers = workers
-        self._normals = np.full((len(points), 3), np.nan)
-        self._variation = np.full(len(points), np.nan)
-        self._flatness = np.full(len(points), np.nan)
+        # One row per point: normal, surface variation, flatness (NaN until computed),
+        # so that a call gathers its rows once.
+        self._table = np.full((len(points), 5), np.nan)
         self._spacing = np.full(len(points), np.nan)
 
     def _missing(self, index, known):
@@ -136,8 +138,10 @@ class SurfaceNormals:
         flatness is ``l_1 / l_2``: 0 on a line.
         """
         index = np.asarray(index, dtype=np.intp)
-        missing = self._missing(index, self._variation)
-        if len(missing):
+        rows = self._table[index]
+        unknown = np.isnan(rows[:, 3])
+        if unknown.any():
+            missing = self._missing(index[unknown], self._table[:, 3])
             distance, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
             near = near.reshape(len(missing), self.k)
             if self.k > 1:  # the nearest other point: the spacing, for free
@@ -146,15 +150,16 @@ class SurfaceNormals:
             hood = hood - hood.mean(axis=1, keepdims=True)
             covariance = np.einsum("nki,nkj->nij", hood, hood)
             values, vectors = np.linalg.eigh(covariance)
-            self._normals[missing] = vectors[:, :, 0]
+            self._table[missing, :3] = vectors[:, :, 0]
             total = values.sum(axis=1)
-            self._variation[missing] = np.where(
+            self._table[missing, 3] = np.where(
                 total > 0, values[:, 0] / np.where(total > 0, total, 1.0), 0.0
             )
-            self._flatness[missing] = np.where(
+            self._table[missing, 4] = np.where(
                 values[:, 2] > 0, values[:, 1] / np.where(values[:, 2] > 0, values[:, 2], 1.0), 0.0
             )
-        return self._normals[index], self._variation[index], self._flatness[index]
+            rows[unknown] = self._table[index[unknown]]
+        return rows[:, :3], rows[:, 3], rows[:, 4]
 
 
 def _group_sums(values, groups, n_groups):
@@ -351,19 +356,21 @@ def multi_body_icp(
     # A cluster whose step fell below ``tol`` is done: later iterations leave its points
     # out (hypothesis tests run hundreds of clusters, most of which settle early).
     alive = np.ones(n_clusters, dtype=bool)
+    # Most points move by far less than the gaps between target points after the first
+    # steps: their nearest target point is re-queried only where it may have changed.
+    nearest_of = MovingNearest(tree, len(every_point), float(gate.max()), workers)
+    every_row = np.arange(len(every_point))
     for iteration in range(max_iter + 1):
         final = converged or iteration == max_iter
         if final and not measure and iteration:
             break
         if final or alive.all():
-            points, group = every_point, every_group
+            points, group, row = every_point, every_group, every_row
         else:
             keep = alive[every_group]
-            points, group = every_point[keep], every_group[keep]
+            points, group, row = every_point[keep], every_group[keep], every_row[keep]
         moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
-        distance, nearest = tree.query(
-            moved, distance_upper_bound=float(gate.max()), workers=workers
-        )
+        distance, nearest = nearest_of(moved, row, gate[group])
         matched = distance <= gate[group]
         rows = np.flatnonzero(matched)
         g = group[rows]
