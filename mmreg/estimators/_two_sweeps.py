@@ -193,9 +193,10 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     squared = np.einsum("ni,ni->n", displacement, displacement)
     length = np.sqrt(np.bincount(group, weights=squared, minlength=n_clusters) / counts)
     along_itself = evidence < ACROSS * length
-    nowhere &= is_line(points, group, n_clusters) | along_itself
+    line = is_line(points, group, n_clusters)
+    nowhere &= line | along_itself
     slides = np.bincount(group, minlength=n_clusters) > 0
-    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere
+    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere | line
     if not slides.any():
         return labels, motions, static
     kept = ~slides
