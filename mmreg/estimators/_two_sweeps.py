@@ -38,7 +38,11 @@ from mmreg.sweeps._ego_motion import _RESIDUAL_POINTS as _EGO_RESIDUAL_POINTS
 from mmreg.sweeps._ego_motion import _residual_scale, ego_motion
 from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
-from mmreg.sweeps._island_motions import choose_island_motions, translation_starts
+from mmreg.sweeps._island_motions import (
+    cannot_move,
+    choose_island_motions,
+    translation_starts,
+)
 from mmreg.sweeps._islands import voxel_islands
 from mmreg.sweeps._new_places import MIN_NEW_PLACE, new_place_shares
 from mmreg.sweeps._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
@@ -1166,7 +1170,19 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         rows = np.repeat(chosen, n_starts)
         pair = islands[rows] * n_starts + np.tile(np.arange(n_starts), len(chosen))
         valid = np.isfinite(starts).all(axis=2).ravel()
-        pair = np.where(valid[pair], pair, -1)
+        # Islands the ego motion explains too well for any motion to be chosen over it
+        # need no ICP (most of the static world: half to three quarters of the islands).
+        target = (sweep, tree, normals)
+        hopeless = cannot_move(
+            a[chosen],
+            islands[chosen],
+            n_islands,
+            ego,
+            sigma,
+            target,
+            max_distance=self.max_distance_,
+        )
+        pair = np.where(valid[pair] & ~hopeless[islands[rows]], pair, -1)
         n_pairs = n_islands * n_starts
         rotations = np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy()
         translations = ego[1] + np.nan_to_num(starts).reshape(n_pairs, 3)
@@ -1193,7 +1209,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             motions,
             valid.reshape(n_islands, n_starts),
             sigma,
-            (sweep, tree, normals),
+            target,
             (resting, islands[inside], 0.5 * self.island_radius_),
             max_distance=self.max_distance_,
             with_unexplained=True,

@@ -30,7 +30,7 @@ from mmreg._array.motion import moving_clusters
 from mmreg._array.unique_rows import unique_rows
 from mmreg.sweeps._icp import subsample_groups
 
-__all__ = ["choose_island_motions", "point_costs", "translation_starts"]
+__all__ = ["cannot_move", "choose_island_motions", "point_costs", "translation_starts"]
 
 # Robust cost: squared residual in units of the scale, capped here (an unmatched point
 # costs the cap).
@@ -317,3 +317,29 @@ def choose_island_motions(
     if with_unexplained:
         return moving, pick, 2 * static_inliers < sizes
     return moving, pick
+
+
+def cannot_move(points, groups, n_islands, ego, scale, target, *, max_distance):
+    """Islands that no alternative motion can make moving, whatever it is.
+
+    :func:`choose_island_motions` asks an alternative to explain a tenth of an island's
+    points more than the ego motion does; where the ego motion already explains more than
+    nine tenths, no motion can: those islands need no hypotheses (their ICP is skipped,
+    and the choice is the same).
+
+    Parameters
+    ----------
+    points, groups, n_islands, ego, scale, target, max_distance
+        As :func:`choose_island_motions` takes them.
+
+    Returns
+    -------
+    hopeless : ndarray of bool, shape (n_islands,)
+    """
+    scale = _SCALE_FACTOR * max(float(scale), np.finfo(float).tiny)
+    static_cost, _ = point_costs(
+        points @ ego[0].T + ego[1], target, max_distance=max_distance, scale=scale
+    )
+    sizes = np.bincount(groups, minlength=n_islands)
+    static_inliers = np.bincount(groups, weights=static_cost < _CAP**2, minlength=n_islands)
+    return sizes - static_inliers < _MIN_EXPLAINED * sizes

@@ -1,0 +1,58 @@
+"""Islands the ego motion explains too well skip their hypotheses: the choice is the same."""
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.spatial import cKDTree
+
+from mmreg.sweeps._icp import SurfaceNormals
+from mmreg.sweeps._island_motions import cannot_move, choose_island_motions
+
+
+def _box(rng, centre, n=120):
+    """Points on the faces of a 1 m box."""
+    p = rng.uniform(-0.5, 0.5, (n, 3))
+    axis = rng.integers(0, 3, n)
+    p[np.arange(n), axis] = np.where(rng.random(n) < 0.5, -0.5, 0.5)
+    return p + centre
+
+
+@given(seed=st.integers(0, 2**16), shift=st.floats(0.3, 2.0), unseen=st.floats(0.0, 0.3))
+def test_no_island_the_ego_motion_explains_can_be_chosen(seed, shift, unseen):
+    rng = np.random.default_rng(seed)
+    n_islands, n_starts = 6, 3
+    boxes = [_box(rng, [4.0 * k, 0.0, 0.0]) for k in range(n_islands)]
+    a = np.vstack(boxes)
+    groups = np.repeat(np.arange(n_islands), [len(b) for b in boxes])
+    # Islands 0-2 stay (a share `unseen` of island 2's points has no second view);
+    # islands 3-5 move by `shift` along y.
+    second = [b if k < 3 else b + [0.0, shift, 0.0] for k, b in enumerate(boxes)]
+    second[2] = second[2][: int(len(second[2]) * (1 - unseen)) or 1]
+    sweep = np.vstack(second)
+    tree = cKDTree(sweep)
+    target = (sweep, tree, SurfaceNormals(sweep, tree, 10))
+    ego = (np.eye(3), np.zeros(3))
+    # Every island gets its true motion, a wrong one and the ego motion as hypotheses.
+    translations = np.zeros((n_islands, n_starts, 3))
+    translations[3:, 0, 1] = shift
+    translations[:, 1] = rng.normal(0.0, 0.5, (n_islands, 3))
+    translations = translations.reshape(-1, 3)
+    rotations = np.broadcast_to(np.eye(3), (len(translations), 3, 3)).copy()
+    valid = np.ones((n_islands, n_starts), dtype=bool)
+    resting = cKDTree(a)
+    hopeless = cannot_move(a, groups, n_islands, ego, 0.005, target, max_distance=1.0)
+    moving, _ = choose_island_motions(
+        a,
+        groups,
+        n_islands,
+        ego,
+        (rotations, translations),
+        valid,
+        0.005,
+        target,
+        (resting, groups, 0.05),
+        max_distance=1.0,
+    )
+    assert hopeless[:2].all() and not hopeless[3:].any()
+    assert moving[3:].all()
+    assert not (moving & hopeless).any()
