@@ -30,6 +30,7 @@ import warnings
 from importlib.metadata import entry_points
 from pathlib import Path
 
+from mmreg import _interrupt
 from mmreg._cli import dataset, demo, evaluate, register, view
 from mmreg._cli._common import STRAY_WARNINGS, CLIError, one_line, remove_partial, show_warning
 
@@ -142,12 +143,14 @@ def main(argv=None):
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _interrupt.installed():
             if not args.debug:  # one line per warning; none of numpy's stray notes
                 for category in STRAY_WARNINGS:
                     warnings.simplefilter("ignore", category)
                 warnings.showwarning = show_warning
-            return int(args._run(args) or 0)
+            code = int(args._run(args) or 0)
+            _interrupt.check()  # a Ctrl-C whose KeyboardInterrupt something swallowed
+            return code
     except CLIError as error:
         if args is not None and args.debug:
             raise

@@ -58,6 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mmreg import _interrupt
 from mmreg.io._arrays import _load_npz
 from mmreg.runner._jobs import (
     Argoverse2PairJob,
@@ -716,6 +717,7 @@ def run_dataset(
                         _write_sweep_flow(out, by_name[name], arrays)
                     rows[name] = row | {"resumed": False}
                     bar.update(1)
+                    _interrupt.check()  # a Ctrl-C that a callback swallowed stops here
     frame = pd.DataFrame([rows[job.name] for job in jobs])
     columns = SUMMARY_COLUMNS + [c for c in frame.columns if c not in SUMMARY_COLUMNS]
     frame = frame.reindex(columns=columns)
