@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from mmreg.sweeps._icp import SurfaceNormals
-from mmreg.sweeps._island_motions import cannot_move, choose_island_motions
+from mmreg.sweeps._island_motions import choose_island_motions, ego_fit
 
 
 def _box(rng, centre, n=120):
@@ -40,7 +40,7 @@ def test_no_island_the_ego_motion_explains_can_be_chosen(seed, shift, unseen):
     rotations = np.broadcast_to(np.eye(3), (len(translations), 3, 3)).copy()
     valid = np.ones((n_islands, n_starts), dtype=bool)
     resting = cKDTree(a)
-    hopeless = cannot_move(a, groups, n_islands, ego, 0.005, target, max_distance=1.0)
+    hopeless = ego_fit(a, groups, n_islands, ego, 0.005, target, max_distance=1.0).hopeless()
     moving, _ = choose_island_motions(
         a,
         groups,

@@ -39,8 +39,8 @@ from mmreg.sweeps._ego_motion import _residual_scale, ego_motion
 from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import (
-    cannot_move,
     choose_island_motions,
+    ego_fit,
     translation_starts,
 )
 from mmreg.sweeps._islands import voxel_islands
@@ -1173,7 +1173,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         # Islands the ego motion explains too well for any motion to be chosen over it
         # need no ICP (most of the static world: half to three quarters of the islands).
         target = (sweep, tree, normals)
-        hopeless = cannot_move(
+        fit = ego_fit(
             a[chosen],
             islands[chosen],
             n_islands,
@@ -1182,7 +1182,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             target,
             max_distance=self.max_distance_,
         )
-        pair = np.where(valid[pair] & ~hopeless[islands[rows]], pair, -1)
+        pair = np.where(valid[pair] & ~fit.hopeless()[islands[rows]], pair, -1)
         n_pairs = n_islands * n_starts
         rotations = np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy()
         translations = ego[1] + np.nan_to_num(starts).reshape(n_pairs, 3)
@@ -1201,7 +1201,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             workers=self._workers(),
         )
         motions = (result.rotations, result.translations)
-        moving, pick, unexplained = choose_island_motions(
+        moving, pick = choose_island_motions(
             a[chosen],
             islands[chosen],
             n_islands,
@@ -1212,7 +1212,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             target,
             (resting, islands[inside], 0.5 * self.island_radius_),
             max_distance=self.max_distance_,
-            with_unexplained=True,
+            fit=fit,
         )
         rotations = np.broadcast_to(ego[0], (n_islands, 3, 3)).copy()
         translations = np.broadcast_to(ego[1], (n_islands, 3)).copy()
@@ -1232,7 +1232,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 normals,
             )
             rotations[~moving], translations[~moving] = ego
-        return moving, rotations, translations, unexplained
+        return moving, rotations, translations, fit.mostly_unexplained()
 
     def _resolve_lengths(self):
         """The lengths in use: as given, or ``"auto"`` from the estimator's ``tau``."""

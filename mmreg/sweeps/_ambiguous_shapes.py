@@ -53,8 +53,7 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     >>> slides_in_plane(np.vstack([patch, patch]), groups, 2, (rotations, translations), ego)
     array([ True, False])
     """
-    moments = group_moments(points, points, groups, n_groups)
-    spread, axes = np.linalg.eigh(moments.cross)
+    moments, spread, axes = _principal_axes(points, groups, n_groups)
     flat = spread[:, 0] < _FLATNESS * spread[:, 1]
     normal = axes[:, :, 0] @ ego[0].T  # where the ego motion turns the plane
     rotations, translations = motions
@@ -89,5 +88,12 @@ def is_line(points, groups, n_groups):
     >>> is_line(np.vstack([pole, box]), np.repeat([0, 1], 50), 2)
     array([ True, False])
     """
-    spread = np.linalg.eigvalsh(group_moments(points, points, groups, n_groups).cross)
+    _, spread, _ = _principal_axes(points, groups, n_groups)
     return spread[:, 1] < _FLATNESS * spread[:, 2]
+
+
+def _principal_axes(points, groups, n_groups):
+    """Each group's moments, and the spreads (ascending) and axes of its points."""
+    moments = group_moments(points, points, groups, n_groups)
+    spread, axes = np.linalg.eigh(moments.cross)
+    return moments, spread, axes

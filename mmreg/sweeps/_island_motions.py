@@ -21,6 +21,8 @@ scan pattern, occlusions); the price and the motion rule keep it static, so the 
 world reaches the estimator as one motion.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 from sklearn.utils import check_random_state
@@ -30,7 +32,7 @@ from mmreg._array.motion import moving_clusters
 from mmreg._array.unique_rows import unique_rows
 from mmreg.sweeps._icp import subsample_groups
 
-__all__ = ["cannot_move", "choose_island_motions", "point_costs", "translation_starts"]
+__all__ = ["EgoFit", "choose_island_motions", "ego_fit", "point_costs", "translation_starts"]
 
 # Robust cost: squared residual in units of the scale, capped here (an unmatched point
 # costs the cap).
@@ -215,7 +217,7 @@ def choose_island_motions(
     claims,
     *,
     max_distance,
-    with_unexplained=False,
+    fit=None,
 ):
     """Which islands move, and which of their ICP results they keep.
 
@@ -243,8 +245,8 @@ def choose_island_motions(
         the ego motion, their islands, and the distance within which a point of the
         second sweep is the static view of one of them.
     max_distance : float
-    with_unexplained : bool, default=False
-        Whether to return ``unexplained`` too.
+    fit : EgoFit or None, default=None
+        :func:`ego_fit` of the same points, when the caller has it already.
 
     Returns
     -------
@@ -252,18 +254,13 @@ def choose_island_motions(
     pick : ndarray of shape (n_islands,)
         Index into ``motions`` of each island's best alternative (meaningful where
         ``moving``).
-    unexplained : ndarray of bool, shape (n_islands,)
-        Whether the ego motion leaves most of the island's points unexplained (cost at
-        the cap); only with ``with_unexplained``.
     """
     rotations, translations = motions
     n_starts = valid.shape[1]
-    # The ego ICP's scale is that of its best surfaces (the kernel's inliers); the
-    # likelihood's is that of every surface: vegetation, edges, other scan lines.
-    scale = _SCALE_FACTOR * max(float(scale), np.finfo(float).tiny)
-    static_cost, _ = point_costs(
-        points @ ego[0].T + ego[1], target, max_distance=max_distance, scale=scale
-    )
+    if fit is None:
+        fit = ego_fit(points, groups, n_islands, ego, scale, target, max_distance=max_distance)
+    scale = _likelihood_scale(scale)
+    static_cost, sizes, static_inliers = fit
     rows = np.repeat(np.arange(len(points)), n_starts)
     index = groups[rows] * n_starts + np.tile(np.arange(n_starts), len(points))
     moved = np.einsum("nij,nj->ni", rotations[index], points[rows]) + translations[index]
@@ -274,7 +271,6 @@ def choose_island_motions(
         np.bincount(index, weights=static_cost[rows], minlength=n_pairs)
         - np.bincount(index, weights=cost, minlength=n_pairs)
     )
-    sizes = np.bincount(groups, minlength=n_islands)
     price = 0.5 * _PARAMETERS * np.log(np.maximum(sizes, 2))
     # mmreg's rule on the feet as correspondences; cluster 0 is the ego motion.
     matched = np.isfinite(foot[:, 0])
@@ -298,7 +294,6 @@ def choose_island_motions(
         np.bincount(index[hit], minlength=n_pairs), 1
     )
     inliers = np.bincount(index, weights=cost < _CAP**2, minlength=n_pairs)
-    static_inliers = np.bincount(groups, weights=static_cost < _CAP**2, minlength=n_islands)
     more = inliers - np.repeat(static_inliers, n_starts)
     explained = (more >= _MIN_EXPLAINED * np.repeat(sizes, n_starts)) & (
         more >= _MIN_RECOVERED * np.repeat(sizes - static_inliers, n_starts)
@@ -313,19 +308,39 @@ def choose_island_motions(
     score = np.where(eligible, gain.reshape(n_islands, n_starts), -np.inf)
     best = np.argmax(score, axis=1)
     moving = eligible.any(axis=1)
-    pick = np.arange(n_islands) * n_starts + best
-    if with_unexplained:
-        return moving, pick, 2 * static_inliers < sizes
-    return moving, pick
+    return moving, np.arange(n_islands) * n_starts + best
 
 
-def cannot_move(points, groups, n_islands, ego, scale, target, *, max_distance):
-    """Islands that no alternative motion can make moving, whatever it is.
+def _likelihood_scale(scale):
+    # The ego ICP's scale is that of its best surfaces (the kernel's inliers); the
+    # likelihood's is that of every surface: vegetation, edges, other scan lines.
+    return _SCALE_FACTOR * max(float(scale), np.finfo(float).tiny)
 
-    :func:`choose_island_motions` asks an alternative to explain a tenth of an island's
-    points more than the ego motion does; where the ego motion already explains more than
-    nine tenths, no motion can: those islands need no hypotheses (their ICP is skipped,
-    and the choice is the same).
+
+class EgoFit(NamedTuple):
+    """How the ego motion explains each island: per point, and counted per island."""
+
+    cost: np.ndarray  # of every point, as point_costs gives it
+    sizes: np.ndarray  # points per island
+    inliers: np.ndarray  # points per island under the cost's cap
+
+    def hopeless(self):
+        """Islands no alternative motion can make moving, whatever it is.
+
+        :func:`choose_island_motions` asks an alternative to explain a tenth of an
+        island's points more than the ego motion does; where the ego motion already
+        explains more than nine tenths, no motion can: those islands need no hypotheses
+        (their ICP is skipped, and the choice is the same).
+        """
+        return self.sizes - self.inliers < _MIN_EXPLAINED * self.sizes
+
+    def mostly_unexplained(self):
+        """Islands the ego motion leaves more than half unexplained (cost at the cap)."""
+        return 2 * self.inliers < self.sizes
+
+
+def ego_fit(points, groups, n_islands, ego, scale, target, *, max_distance):
+    """:class:`EgoFit` of the islands' points under the ego motion.
 
     Parameters
     ----------
@@ -334,12 +349,14 @@ def cannot_move(points, groups, n_islands, ego, scale, target, *, max_distance):
 
     Returns
     -------
-    hopeless : ndarray of bool, shape (n_islands,)
+    EgoFit
     """
-    scale = _SCALE_FACTOR * max(float(scale), np.finfo(float).tiny)
-    static_cost, _ = point_costs(
-        points @ ego[0].T + ego[1], target, max_distance=max_distance, scale=scale
+    cost, _ = point_costs(
+        points @ ego[0].T + ego[1],
+        target,
+        max_distance=max_distance,
+        scale=_likelihood_scale(scale),
     )
     sizes = np.bincount(groups, minlength=n_islands)
-    static_inliers = np.bincount(groups, weights=static_cost < _CAP**2, minlength=n_islands)
-    return sizes - static_inliers < _MIN_EXPLAINED * sizes
+    inliers = np.bincount(groups, weights=cost < _CAP**2, minlength=n_islands)
+    return EgoFit(cost, sizes, inliers)
