@@ -158,8 +158,10 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     spacing where they land (``target``: the second sweep, its cKDTree and its
     SurfaceNormals): no sweep can show such a motion, whatever the noise. And so does
     a cluster that its motion shows at a new place with fewer than a tenth of its
-    points (:mod:`mmreg.sweeps._new_places`): a pole or a wall slid up or down along
-    itself lands on surfaces the first sweep held already.
+    points (:mod:`mmreg.sweeps._new_places`) while moving along its own surfaces
+    (normal component under half the displacement): a wall slid up or down along itself
+    lands on surfaces the first sweep held already. And so does a line of points (a
+    pole, a ring of road), whatever it shows.
 
     ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; ``reach``:
     the ICP's gate with capture times, else None; ``whole``:
@@ -189,16 +191,15 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     shares = new_place_shares(
         a, labels, motions[:2], static, sigma, target, reach=reach, whole=whole
     )
-    nowhere = shares < MIN_NEW_PLACE
-    # Only a shape that can slide along itself (a line of points; surfaces whose normals
-    # lie across the motion: a wall, a building's corner): a car seen from behind that
-    # drives on by less than its length lands within its old footprint too (its rear
-    # face among its old roof and sides), but moves across its rear face.
+    # Only where its surfaces' normals lie across the motion (a wall, a building's
+    # corner slid along itself): a car seen from behind that drives on by less than its
+    # length lands within its old footprint too (its rear face among its old roof and
+    # sides), but moves across its rear face.
     squared = np.einsum("ni,ni->n", displacement, displacement)
     length = np.sqrt(np.bincount(group, weights=squared, minlength=n_clusters) / counts)
-    along_itself = evidence < ACROSS * length
+    nowhere = (shares < MIN_NEW_PLACE) & (evidence < ACROSS * length)
+    # A line of points (a pole, a ring of road) slides along itself and onto any other.
     line = is_line(points, group, n_clusters)
-    nowhere &= line | along_itself
     slides = np.bincount(group, minlength=n_clusters) > 0
     slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere | line
     if not slides.any():
