@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mmreg import SweepRegistration
+from mmreg._array.geometry import rotation_angle
 from mmreg.datasets import make_lidar_sweeps
 from mmreg.metrics import objects_found
 
@@ -34,10 +35,6 @@ INTERVALS = (0.05, 0.1, 0.5)
 SPEEDS = (3.0, 10.0)
 BEAMS = (32, 64)
 MIN_CAR_POINTS = 50
-
-
-def _angle_deg(r1, r2):
-    return float(np.degrees(np.arccos(np.clip((np.trace(r1.T @ r2) - 1) / 2, -1.0, 1.0))))
 
 
 def _row(interval, speed, beams, seeds):
@@ -66,7 +63,7 @@ def _row(interval, speed, beams, seeds):
             np.mean(static[est.labels_ == c]) > 0.5 for c in np.flatnonzero(est.moving_)
         )
         truth = scene.transforms[0]
-        rotation.append(_angle_deg(est.ego_motion_[0], truth[:3, :3]))
+        rotation.append(float(rotation_angle(est.ego_motion_[0], truth[:3, :3])))
         translation.append(1000 * np.linalg.norm(est.ego_motion_[1] - truth[:3, 3]))
     return {
         "interval (s)": interval,
