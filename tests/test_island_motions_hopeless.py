@@ -41,7 +41,7 @@ def test_no_island_the_ego_motion_explains_can_be_chosen(seed, shift, unseen):
     valid = np.ones((n_islands, n_starts), dtype=bool)
     resting = cKDTree(a)
     hopeless = ego_fit(a, groups, n_islands, ego, 0.005, target, max_distance=1.0).hopeless()
-    moving, _ = choose_island_motions(
+    moving, _, _ = choose_island_motions(
         a,
         groups,
         n_islands,

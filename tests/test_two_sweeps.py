@@ -285,7 +285,7 @@ def test_island_that_only_slides_along_its_surface_stays_static():
     rotations = np.broadcast_to(np.eye(3), (4, 3, 3)).copy()
     translations = np.array([[0, 0, 0], [0.4, 0, 0], [0, 0, 0], [1.5, 0, 0]], dtype=float)
     resting = cKDTree(points @ ego[0].T + ego[1])
-    moving, pick = choose_island_motions(
+    moving, pick, _ = choose_island_motions(
         points,
         groups,
         2,

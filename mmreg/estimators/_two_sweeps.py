@@ -40,7 +40,9 @@ from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_swe
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import (
     choose_island_motions,
+    driven_through,
     ego_fit,
+    facing_away,
     translation_starts,
 )
 from mmreg.sweeps._islands import voxel_islands
@@ -201,7 +203,11 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     # A line of points (a pole, a ring of road) slides along itself and onto any other.
     line = is_line(points, group, n_clusters)
     slides = np.bincount(group, minlength=n_clusters) > 0
-    slides &= (evidence < _SLIDE_SCALES * sigma) | unseen | nowhere | line
+    # Sliding along itself shows nothing where the slide lands on places the first sweep
+    # held already; a walker crossing the view slides its face along itself too, but
+    # arrives where the first sweep saw through.
+    slid = (evidence < _SLIDE_SCALES * sigma) & (shares < MIN_NEW_PLACE)
+    slides &= slid | unseen | nowhere | line
     if not slides.any():
         return labels, motions, static
     kept = ~slides
@@ -315,8 +321,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     island_radius : float or "auto", default="auto"
         Raw mode: side of the voxels whose touching sets are the sweeps' islands (points
         within this distance always share an island). ``"auto"``: a tenth of ``tau``.
-    min_island_size : int, default=30
-        Raw mode: smaller islands take the ego motion.
+    min_island_size : int, default=12
+        Raw mode: smaller islands take the ego motion. 12 is the fewest matched points
+        with which the ICP moves a cluster (6 unknowns and a margin): a pedestrian 20 m
+        from a 32-beam sensor returns 15-30 points.
     max_displacement : float or "auto", default="auto"
         Raw mode: largest motion of an object relative to the static world, between the
         sweeps. ``"auto"``: ``0.6 tau`` (3 m with ``tau=5``: 30 m/s at 10 Hz), or 1.5
@@ -495,7 +503,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         max_distance="auto",
         max_points=5000,
         island_radius="auto",
-        min_island_size=30,
+        min_island_size=12,
         max_displacement="auto",
         max_rounds=2,
         raw_init="islands",
@@ -1086,26 +1094,33 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         at_rest = a @ ego[0].T + ego[1]  # the first sweep where the ego motion puts it
         inside = np.flatnonzero(islands >= 0)
         resting = cKDTree(at_rest[inside])
+        # The islands' surfaces where the ego motion puts them (their normals on demand).
+        rest_normals = None
+        if is_z_up_sweep(a):
+            rest_normals = SurfaceNormals(at_rest[inside], resting, 10, self._workers())
         search = (a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside)
+        search += (rest_normals,)
         reach = self.max_displacement_
-        moving, rotations, translations, unexplained = self._island_hypotheses(
+        moving, rotations, translations, unexplained, explained = self._island_hypotheses(
             islands, n_islands, search, reach, rng
         )
         if self.max_displacement == "auto":
             # The reach is a guess at the traffic's speed times the sweeps' interval, which
             # the points do not give: a slow ego car 0.5 s apart leaves a 5 m mover beyond
             # it. Islands that neither the ego motion nor any motion within the reach
-            # explains search again, alone, twice as far (a copy of the random state, so
-            # that the steps after see the same draws whether or not one searches).
+            # explains (most of their points) search again, alone, twice as far (a copy
+            # of the random state, so that the steps after see the same draws whether or
+            # not one searches). Within the reach such a car can still find a motion
+            # that lays half of it on something else and passes as a mover.
             wide_rng = copy.deepcopy(rng)
             for _ in range(_WIDENINGS):
-                lost = ~moving & unexplained
+                lost = unexplained & (~moving | (explained < 0.5))
                 if not lost.any():
                     break
                 reach *= 2.0
                 number = np.cumsum(lost) - 1
                 subset = np.where(islands >= 0, np.where(lost, number, -1)[islands], -1)
-                found, sub_r, sub_t, sub_unexplained = self._island_hypotheses(
+                found, sub_r, sub_t, sub_unexplained, sub_explained = self._island_hypotheses(
                     subset, int(lost.sum()), search, reach, wide_rng
                 )
                 where = np.flatnonzero(lost)
@@ -1113,8 +1128,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 # a pole more poles to match.
                 found &= ~slides_in_plane(a, subset, len(where), (sub_r, sub_t), ego)
                 found &= ~is_line(a, subset, len(where))
-                moving[where] = found
+                # A motion found twice as far replaces one found within the reach only
+                # where it explains more of the island.
+                found &= ~moving[where] | (sub_explained > explained[where])
+                moving[where[found]] = True
                 rotations[where[found]], translations[where[found]] = sub_r[found], sub_t[found]
+                explained[where[found]] = sub_explained[found]
                 unexplained[where] = sub_unexplained
         # Objects that move by a few sampling spacings stay within the ego motion's
         # band and often share an island with a static structure: found point by point
@@ -1148,9 +1167,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         ``search`` holds what every search shares (the sweeps, the second sweep's islands,
         the ego motion and its scale, the first sweep at rest and its tree). Returns
         whether each island moves, its rotation and translation (the ego motion's where
-        it does not), and whether the ego motion leaves most of its points unexplained.
+        it does not), whether the ego motion leaves most of its points unexplained, and
+        the share of its points that its motion explains (where it moves).
         """
-        a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside = search
+        a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside = search[:10]
+        rest_normals = search[10]
         _, tree, normals, _, _ = context
         starts = translation_starts(
             a,
@@ -1183,6 +1204,22 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             target,
             max_distance=self.max_distance_,
         )
+        # Faces the second sensor cannot see, where the ego motion puts them, are no
+        # sign of motion (a building's end wall driven past, 2 Hz keyframes), unless
+        # the sensor drove through them (the rear of the car ahead): asked of the
+        # islands the ego motion does not already explain, in LiDAR sweeps as a sensor
+        # writes them (z up, each sensor at its sweep's origin).
+        open_ = np.flatnonzero(~fit.hopeless()[islands[chosen]])
+        if len(open_) and rest_normals is not None:
+            rest = at_rest[chosen[open_]]
+            normal, _, _ = rest_normals(np.searchsorted(inside, chosen[open_]))
+            hidden = np.zeros(len(chosen), dtype=bool)
+            hidden[open_] = facing_away(rest, normal, ego[1], np.zeros(3))
+            through = driven_through(
+                rest, islands[chosen[open_]], n_islands, ego[1], np.zeros(3), self.island_radius_
+            )
+            hidden[open_] &= ~through[islands[chosen[open_]]]
+            fit = fit.with_hidden(islands[chosen], hidden)
         pair = np.where(valid[pair] & ~fit.hopeless()[islands[rows]], pair, -1)
         n_pairs = n_islands * n_starts
         rotations = np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy()
@@ -1202,7 +1239,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             workers=self._workers(),
         )
         motions = (result.rotations, result.translations)
-        moving, pick = choose_island_motions(
+        moving, pick, explained = choose_island_motions(
             a[chosen],
             islands[chosen],
             n_islands,
@@ -1233,7 +1270,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 normals,
             )
             rotations[~moving], translations[~moving] = ego
-        return moving, rotations, translations, fit.mostly_unexplained()
+        return moving, rotations, translations, fit.mostly_unexplained(), explained
 
     def _resolve_lengths(self):
         """The lengths in use: as given, or ``"auto"`` from the estimator's ``tau``."""

@@ -32,7 +32,15 @@ from mmreg._array.motion import moving_clusters
 from mmreg._array.unique_rows import unique_rows
 from mmreg.sweeps._icp import subsample_groups
 
-__all__ = ["EgoFit", "choose_island_motions", "ego_fit", "point_costs", "translation_starts"]
+__all__ = [
+    "EgoFit",
+    "choose_island_motions",
+    "driven_through",
+    "ego_fit",
+    "facing_away",
+    "point_costs",
+    "translation_starts",
+]
 
 # Robust cost: squared residual in units of the scale, capped here (an unmatched point
 # costs the cap).
@@ -254,6 +262,9 @@ def choose_island_motions(
     pick : ndarray of shape (n_islands,)
         Index into ``motions`` of each island's best alternative (meaningful where
         ``moving``).
+    explained : ndarray of shape (n_islands,)
+        Share of each island's points that its best alternative explains (cost under
+        the cap; meaningful where ``moving``).
     """
     rotations, translations = motions
     n_starts = valid.shape[1]
@@ -308,7 +319,8 @@ def choose_island_motions(
     score = np.where(eligible, gain.reshape(n_islands, n_starts), -np.inf)
     best = np.argmax(score, axis=1)
     moving = eligible.any(axis=1)
-    return moving, np.arange(n_islands) * n_starts + best
+    pick = np.arange(n_islands) * n_starts + best
+    return moving, pick, inliers[pick] / np.maximum(sizes, 1)
 
 
 def _likelihood_scale(scale):
@@ -337,6 +349,76 @@ class EgoFit(NamedTuple):
     def mostly_unexplained(self):
         """Islands the ego motion leaves more than half unexplained (cost at the cap)."""
         return 2 * self.inliers < self.sizes
+
+    def with_hidden(self, groups, hidden):
+        """The same fit where the points ``hidden`` cost nothing: explained at rest.
+
+        A surface that faces away from the second sensor where the ego motion puts it
+        (see :func:`facing_away`) cannot be in the second sweep, so its absence there is
+        no sign that it moved: the ego motion explains it as well as any motion.
+        """
+        cost = np.where(hidden, 0.0, self.cost)
+        inliers = np.bincount(groups, weights=cost < _CAP**2, minlength=len(self.sizes))
+        return EgoFit(cost, self.sizes, inliers)
+
+
+def facing_away(points, normals, first_sensor, second_sensor):
+    """Whether each point's surface, seen from the first sensor, faces away from the second.
+
+    ``normals`` are the surface's unit normals at ``points`` (either sign); they are
+    turned towards ``first_sensor``, which saw the points, and a point faces away from
+    ``second_sensor`` where that sensor lies behind its surface's plane: a building's
+    end wall that the sensor has driven past, the far side of a box it went round.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.sweeps._island_motions import facing_away
+    >>> wall = np.array([[5.0, 20.0, 1.0]])  # a wall facing -x, at x = 5
+    >>> normal = np.array([[1.0, 0.0, 0.0]])
+    >>> facing_away(wall, normal, np.zeros(3), np.array([3.0, 0.0, 0.0])).tolist()
+    [False]
+    >>> facing_away(wall, normal, np.zeros(3), np.array([7.0, 0.0, 0.0])).tolist()
+    [True]
+    """
+    towards_first = np.einsum("ni,ni->n", normals, first_sensor - points)
+    normals = np.where((towards_first < 0)[:, None], -normals, normals)
+    return np.einsum("ni,ni->n", normals, second_sensor - points) < 0
+
+
+def driven_through(points, groups, n_groups, start, end, reach):
+    """Whether the sensor, going from ``start`` to ``end``, passed through each group.
+
+    Seen from above (x and y; z is up), among the group's points beside the sensor's
+    path (between its ends): some within ``reach`` of the path, or some on either side
+    of it. A static surface the sensor's vehicle drove through is impossible: the rear
+    of the car ahead, which the sensor passes where the car stood, moved on.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.sweeps._island_motions import driven_through
+    >>> rear = np.array([[4.0, -0.8, 1.0], [4.0, 0.9, 1.0]])  # across the path, 4 m on
+    >>> wall = np.array([[4.0, 20.0, 1.0], [4.0, 21.0, 1.0]])  # 20 m to the side
+    >>> end = np.array([5.0, 0.0, 0.0])
+    >>> driven_through(np.vstack([rear, wall]), np.array([0, 0, 1, 1]), 2, np.zeros(3), end,
+    ...                0.5).tolist()
+    [True, False]
+    """
+    start, end = np.asarray(start, dtype=float)[:2], np.asarray(end, dtype=float)[:2]
+    step = end - start
+    length = float(np.linalg.norm(step))
+    if length == 0:
+        return np.zeros(n_groups, dtype=bool)
+    offset = points[:, :2] - start
+    along = offset @ step / length**2
+    side = (offset[:, 0] * step[1] - offset[:, 1] * step[0]) / length
+    beside = (along >= 0) & (along <= 1)
+    groups, side = groups[beside], side[beside]
+    near = np.bincount(groups[np.abs(side) < reach], minlength=n_groups) > 0
+    left = np.bincount(groups[side > 0], minlength=n_groups) > 0
+    right = np.bincount(groups[side < 0], minlength=n_groups) > 0
+    return near | (left & right)
 
 
 def ego_fit(points, groups, n_islands, ego, scale, target, *, max_distance):
