@@ -219,12 +219,6 @@ def make_lidar_sweeps(
         Things of a pedestrian's size that do not move, on the sidewalks: people standing
         and bins (about 0.6 x 0.6 x 1.0 m). They are the static world's (label 0).
 
-        The small things keep 2 m apart, 4 m from the sensor and 0.3 m from every other
-        box, at both sweeps. They are drawn after everything else, so asking for them
-        leaves the buildings, the cars and the ego motion as they are without them (the
-        range noise is drawn after them and changes); with the three counts at 0 the scene
-        is the one drawn without them.
-
     Returns
     -------
     scene : sklearn.utils.Bunch
@@ -239,6 +233,14 @@ def make_lidar_sweeps(
         ``transforms[k]`` maps a point of ``a`` with label k to where it is in the second
         sweep's frame (label 0: the inverse of the ego motion); ``flow`` (n, 3): each
         point's motion into that frame; ``interval``.
+
+    Notes
+    -----
+    The walkers, cyclists and standing things keep 2 m apart, 4 m from the sensor and
+    0.3 m from every other box, at both sweeps. They are drawn after everything else, so
+    asking for them leaves the buildings, the cars and the ego motion as they are without
+    them (the range noise, drawn after them, changes); with the three counts at 0 the
+    scene is the one drawn before they existed.
 
     Examples
     --------
