@@ -25,7 +25,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
 from mmreg._array.flow import rigid_flow
-from mmreg._array.grouping import group_bounds
+from mmreg._array.grouping import group_bounds, group_centroids
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
 from mmreg._array.point_memo import PointMemo
@@ -78,6 +78,9 @@ _TRAFFIC_PER_EGO = 1.5
 # Raw mode, "auto" max_displacement: how many times islands that nothing within the reach
 # explains search again, each time twice as far.
 _WIDENINGS = 1
+# Raw mode, z-up LiDAR sweeps: the steepest climb (rise over run, relative to the static
+# world) of an island's motion; the steepest roads climb about 1 in 3.
+_MAX_GRADE = 0.5
 # Raw mode, the ego vehicle's body (mmreg.sweeps._ego_body), in units of tau: candidates lie
 # within _BODY_REACH of the sensor (3 m at tau 5; nuScenes' body returns lie within
 # 2.5 m) and match the other sweep within _BODY_MATCH (5 cm) at the same coordinates;
@@ -1239,6 +1242,18 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             workers=self._workers(),
         )
         motions = (result.rotations, result.translations)
+        # The reach bounds where the ICP ends, not only where it starts: one that slid a
+        # car's faces along themselves out of the reach found no motion within it.
+        centroids, _ = group_centroids(a[chosen], islands[chosen], n_islands)
+        centre = np.repeat(centroids, n_starts, axis=0)
+        moved = np.einsum("nij,nj->ni", result.rotations, centre) + result.translations
+        offset = moved - (centre @ ego[0].T + ego[1])
+        valid &= ~(np.linalg.norm(offset, axis=1) > reach)
+        if rest_normals is not None:
+            # Traffic moves along the ground: a climb steeper than 1 in 2 (beyond the
+            # noise) is the rings of a sparse sensor slid onto each other, not a motion.
+            climb = np.abs(offset[:, 2]) - _MAX_GRADE * np.linalg.norm(offset[:, :2], axis=1)
+            valid &= ~(climb > _SLIDE_SCALES * sigma)
         moving, pick, explained = choose_island_motions(
             a[chosen],
             islands[chosen],
