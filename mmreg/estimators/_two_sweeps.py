@@ -79,8 +79,12 @@ _TRAFFIC_PER_EGO = 1.5
 # explains search again, each time twice as far.
 _WIDENINGS = 1
 # Raw mode, z-up LiDAR sweeps: the steepest climb (rise over run, relative to the static
-# world) of an island's motion; the steepest roads climb about 1 in 3.
-_MAX_GRADE = 0.5
+# world) of an island's motion: roads climb 1 in 10 or less, very few over 1 in 5.
+_MAX_GRADE = 0.25
+# Raw mode: the searches on weaker evidence (slow movers, a motion of a spacing or two;
+# the wider reach, eight times the volume to match by chance) take islands of this many
+# times min_island_size (30 points at the default).
+_WEAK_EVIDENCE_SIZES = 2.5
 # Raw mode, the ego vehicle's body (mmreg.sweeps._ego_body), in units of tau: candidates lie
 # within _BODY_REACH of the sensor (3 m at tau 5; nuScenes' body returns lie within
 # 2.5 m) and match the other sweep within _BODY_MATCH (5 cm) at the same coordinates;
@@ -1116,8 +1120,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             # not one searches). Within the reach such a car can still find a motion
             # that lays half of it on something else and passes as a mover.
             wide_rng = copy.deepcopy(rng)
+            # Twice as far, a chance match is likelier: only islands of a few times
+            # the smallest size search there.
+            sizes = np.bincount(islands[islands >= 0], minlength=n_islands)
+            large = sizes >= _WEAK_EVIDENCE_SIZES * self.min_island_size
             for _ in range(_WIDENINGS):
-                lost = unexplained & (~moving | (explained < 0.5))
+                lost = unexplained & (~moving | (explained < 0.5)) & large
                 if not lost.any():
                     break
                 reach *= 2.0
@@ -1149,7 +1157,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             (sweep, tree, normals),
             resting,
             cell=0.5 * self.island_radius_,
-            min_size=self.min_island_size,
+            min_size=int(np.ceil(_WEAK_EVIDENCE_SIZES * self.min_island_size)),
             max_points=2 * _HYPOTHESIS_POINTS,
             max_distance=self.max_distance_,
             max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
@@ -1250,7 +1258,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         offset = moved - (centre @ ego[0].T + ego[1])
         valid &= ~(np.linalg.norm(offset, axis=1) > reach)
         if rest_normals is not None:
-            # Traffic moves along the ground: a climb steeper than 1 in 2 (beyond the
+            # Traffic moves along the ground: a climb steeper than 1 in 4 (beyond the
             # noise) is the rings of a sparse sensor slid onto each other, not a motion.
             climb = np.abs(offset[:, 2]) - _MAX_GRADE * np.linalg.norm(offset[:, :2], axis=1)
             valid &= ~(climb > _SLIDE_SCALES * sigma)
