@@ -1132,7 +1132,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 number = np.cumsum(lost) - 1
                 subset = np.where(islands >= 0, np.where(lost, number, -1)[islands], -1)
                 found, sub_r, sub_t, sub_unexplained, sub_explained = self._island_hypotheses(
-                    subset, int(lost.sum()), search, reach, wide_rng
+                    subset, int(lost.sum()), search, reach, wide_rng, last=True
                 )
                 where = np.flatnonzero(lost)
                 # Twice as far, a flat patch finds more of its plane to slide along and
@@ -1172,8 +1172,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             moving = np.concatenate([moving, np.ones(len(slow_rotations), dtype=bool)])
         return islands, rotations, translations, moving
 
-    def _island_hypotheses(self, islands, n_islands, search, reach, rng):
+    def _island_hypotheses(self, islands, n_islands, search, reach, rng, last=False):
         """Each island's motion hypotheses within ``reach``, and the one it keeps.
+
+        The ICPs start within ``reach`` and, but in the ``last`` search, end there.
 
         ``search`` holds what every search shares (the sweeps, the second sweep's islands,
         the ego motion and its scale, the first sweep at rest and its tree). Returns
@@ -1221,9 +1223,16 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         # islands the ego motion does not already explain, in LiDAR sweeps as a sensor
         # writes them (z up, each sensor at its sweep's origin).
         open_ = np.flatnonzero(~fit.hopeless()[islands[chosen]])
+        # The noise of a climb: the ego's residual, or the islands' own sampling spacing.
+        rise_noise = np.full(n_islands, _SLIDE_SCALES * sigma)
         if len(open_) and rest_normals is not None:
             rest = at_rest[chosen[open_]]
-            normal, _, _ = rest_normals(np.searchsorted(inside, chosen[open_]))
+            position = np.searchsorted(inside, chosen[open_])
+            normal, _, _ = rest_normals(position)
+            spacing = _group_median(
+                rest_normals.spacing(position), islands[chosen[open_]], n_islands
+            )
+            rise_noise = np.fmax(rise_noise, spacing)
             hidden = np.zeros(len(chosen), dtype=bool)
             hidden[open_] = facing_away(rest, normal, ego[1], np.zeros(3))
             through = driven_through(
@@ -1251,17 +1260,20 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         )
         motions = (result.rotations, result.translations)
         # The reach bounds where the ICP ends, not only where it starts: one that slid a
-        # car's faces along themselves out of the reach found no motion within it.
+        # car's faces along themselves out of the reach found no motion within it (and
+        # the island searches again, farther, where the reach is a guess). The last
+        # search keeps what it finds: a sparse car's rings slide it past any bound.
         centroids, _ = group_centroids(a[chosen], islands[chosen], n_islands)
         centre = np.repeat(centroids, n_starts, axis=0)
         moved = np.einsum("nij,nj->ni", result.rotations, centre) + result.translations
         offset = moved - (centre @ ego[0].T + ego[1])
-        valid &= ~(np.linalg.norm(offset, axis=1) > reach)
+        if not last:
+            valid &= ~(np.linalg.norm(offset, axis=1) > reach)
         if rest_normals is not None:
             # Traffic moves along the ground: a climb steeper than 1 in 4 (beyond the
-            # noise) is the rings of a sparse sensor slid onto each other, not a motion.
+            # noise, or a spacing) is the rings of a sparse sensor slid onto each other.
             climb = np.abs(offset[:, 2]) - _MAX_GRADE * np.linalg.norm(offset[:, :2], axis=1)
-            valid &= ~(climb > _SLIDE_SCALES * sigma)
+            valid &= ~(climb > np.repeat(rise_noise, n_starts))
         moving, pick, explained = choose_island_motions(
             a[chosen],
             islands[chosen],
