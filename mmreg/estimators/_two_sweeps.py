@@ -290,7 +290,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       sweep's points within ``max_displacement`` (as ICP-Flow does).
       An island keeps the ego motion unless its best alternative wins by a clear margin
       (robust point-to-plane likelihood gain over a BIC price, a fifth more of its points
-      explained, and mmreg's moving rule; :mod:`mmreg.sweeps._island_motions`). Small objects
+      explained, and mmreg's moving rule; :mod:`mmreg.sweeps._island_motions`); faces
+      the second sensor cannot see where the ego motion puts them (it drove past their
+      plane, not through them) are no sign of motion, nor is a climb steeper than 1 in
+      4 (a sparse sensor's rings slid onto each other). z-up sweeps are taken as a
+      sensor writes them, each sensor at its sweep's origin. Small objects
       that move a few sampling spacings (a pedestrian beside a wall) stay within that
       margin; they are found point by point among the islands that keep the ego
       motion (the points the ego motion leaves far from the second sweep or off its
