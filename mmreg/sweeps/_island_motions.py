@@ -306,8 +306,12 @@ def choose_island_motions(
     )
     inliers = np.bincount(index, weights=cost < _CAP**2, minlength=n_pairs)
     more = inliers - np.repeat(static_inliers, n_starts)
-    explained = (more >= _MIN_EXPLAINED * np.repeat(sizes, n_starts)) & (
-        more >= _MIN_RECOVERED * np.repeat(sizes - static_inliers, n_starts)
+    # ... and more of them than its six parameters could fit by chance (a small far
+    # island matched to a stray patch 2-3 m away).
+    explained = (
+        (more >= _MIN_EXPLAINED * np.repeat(sizes, n_starts))
+        & (more >= _MIN_RECOVERED * np.repeat(sizes - static_inliers, n_starts))
+        & (more > _PARAMETERS)
     )
     eligible = (
         valid.ravel()
