@@ -107,3 +107,40 @@ def test_driven_through_is_a_matter_of_the_path_alone(offset, angle, step, later
     start, end = np.asarray(offset), turn @ [step, 0, 0] + offset
     for a, b in ((start, end), (end, start)):
         assert driven_through(points, groups, 2, a, b, 0.5).tolist() == [True, False]
+
+
+@pytest.mark.parametrize(("n_off", "moves"), [(4, False), (12, True)])
+def test_an_alternative_must_explain_more_points_than_its_parameters(n_off, moves):
+    # An island of a flat patch (the ego motion explains it) and n_off points above it
+    # that the second sweep shows 1.5 m on; the alternative explains every point. Six
+    # parameters fit a handful of points by chance: four more are no evidence.
+    from scipy.spatial import cKDTree
+
+    from mmreg.sweeps._icp import SurfaceNormals
+    from mmreg.sweeps._island_motions import choose_island_motions
+
+    rng = np.random.default_rng(0)
+    ground = np.c_[rng.uniform(-20, 20, (20000, 2)), np.zeros(20000)]
+    patch = np.c_[rng.uniform(-1, 1, (20, 2)), np.zeros(20)]
+    top = np.c_[rng.uniform(-0.3, 0.3, (n_off, 2)), rng.uniform(1.5, 2.0, n_off)]
+    shift = np.array([1.5, 0.0, 0.0])
+    sweep = np.vstack([ground, top + shift + rng.normal(0, 0.002, top.shape)])
+    tree = cKDTree(sweep)
+    points = np.vstack([patch, top])
+    groups = np.zeros(len(points), dtype=np.intp)
+    ego = (np.eye(3), np.zeros(3))
+    rotations = np.stack([np.eye(3)] * 2)
+    translations = np.stack([np.zeros(3), shift])
+    moving, _, _ = choose_island_motions(
+        points,
+        groups,
+        1,
+        ego,
+        (rotations, translations),
+        np.array([[False, True]]),
+        0.005,
+        (sweep, tree, SurfaceNormals(sweep, tree, 10)),
+        (cKDTree(points), groups, 0.25),
+        max_distance=1.0,
+    )
+    assert moving.tolist() == [moves]

@@ -10,7 +10,8 @@ an island keeps the ego motion unless
   parameters (BIC: ``3 log n``), under a robust point-to-plane likelihood whose scale is
   three times the ego motion's robust residual scale on the whole sweep,
 * it explains (residual under three scales) a tenth more of the island's points than
-  the ego motion, and a quarter of those the ego motion leaves unexplained, and
+  the ego motion, a quarter of those the ego motion leaves unexplained, and more than
+  six (its six parameters fit as many by chance), and
 * the alternative moves the island relative to the ego motion by mmreg's own rule
   (:func:`mmreg._array.motion.moving_clusters`: median displacement over three times the
   residual scale), with the points' feet on the second sweep's surface as the
