@@ -289,8 +289,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       second, and from the peaks of a histogram of translations towards the second
       sweep's points within ``max_displacement`` (as ICP-Flow does).
       An island keeps the ego motion unless its best alternative wins by a clear margin
-      (robust point-to-plane likelihood gain over a BIC price, a fifth more of its points
-      explained, and mmreg's moving rule; :mod:`mmreg.sweeps._island_motions`); faces
+      (robust point-to-plane likelihood gain over a BIC price, a tenth more of its points
+      explained and more than its six parameters, and mmreg's moving rule;
+      :mod:`mmreg.sweeps._island_motions`); faces
       the second sensor cannot see where the ego motion puts them (it drove past their
       plane, not through them) are no sign of motion, nor is a climb steeper than 1 in
       4 (a sparse sensor's rings slid onto each other). z-up sweeps are taken as a
