@@ -291,11 +291,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       An island keeps the ego motion unless its best alternative wins by a clear margin
       (robust point-to-plane likelihood gain over a BIC price, a tenth more of its points
       explained and more than its six parameters, and mmreg's moving rule;
-      :mod:`mmreg.sweeps._island_motions`); faces
-      the second sensor cannot see where the ego motion puts them (it drove past their
-      plane, not through them) are no sign of motion, nor is a climb steeper than 1 in
-      4 (a sparse sensor's rings slid onto each other). z-up sweeps are taken as a
-      sensor writes them, each sensor at its sweep's origin. Small objects
+      :mod:`mmreg.sweeps._island_motions`). Faces the second sensor cannot see where
+      the ego motion puts them (it drove past their plane, not through them) are no
+      sign of motion, nor is a climb steeper than 1 in 4 (a sparse sensor's rings slid
+      onto each other); z-up sweeps are taken as a sensor writes them, each sensor at
+      its sweep's origin. Small objects
       that move a few sampling spacings (a pedestrian beside a wall) stay within that
       margin; they are found point by point among the islands that keep the ego
       motion (the points the ego motion leaves far from the second sweep or off its
@@ -1111,7 +1111,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         if is_z_up_sweep(a):
             rest_normals = SurfaceNormals(at_rest[inside], resting, 10, self._workers())
         search = (a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside)
-        search += (rest_normals,)
+        search = (*search, rest_normals)
         reach = self.max_displacement_
         moving, rotations, translations, unexplained, explained = self._island_hypotheses(
             islands, n_islands, search, reach, rng
@@ -1183,13 +1183,14 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         The ICPs start within ``reach`` and, but in the ``last`` search, end there.
 
         ``search`` holds what every search shares (the sweeps, the second sweep's islands,
-        the ego motion and its scale, the first sweep at rest and its tree). Returns
+        the ego motion and its scale, the first sweep at rest, its tree and, in z-up
+        sweeps, its normals; see :meth:`_island_motions`). Returns
         whether each island moves, its rotation and translation (the ego motion's where
         it does not), whether the ego motion leaves most of its points unexplained, and
         the share of its points that its motion explains (where it moves).
         """
-        a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside = search[:10]
-        rest_normals = search[10]
+        a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting = search[:9]
+        inside, rest_normals = search[9:]
         _, tree, normals, _, _ = context
         starts = translation_starts(
             a,
