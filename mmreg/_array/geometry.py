@@ -13,6 +13,7 @@ __all__ = [
     "apply_motions",
     "column_bounds",
     "degenerate_groups",
+    "departures",
     "fit_rigid",
     "fit_rigid_grouped",
     "fit_rigid_rows",
@@ -287,6 +288,34 @@ def moved_rows(rotations, translations, labels, a_rows):
             term += entries[i * d + j][labels] * a_rows[j]
         term += shifts[i][labels]
     return moved
+
+
+def departures(points, rotations, translations, ego):
+    """Where each point's own motion puts it, less where the ego motion puts it.
+
+    Parameters
+    ----------
+    points : ndarray of shape (K, 3)
+    rotations : ndarray of shape (K, 3, 3)
+    translations : ndarray of shape (K, 3)
+        One motion per point.
+    ego : tuple of ndarray
+        ``(R, t)`` of the ego motion.
+
+    Returns
+    -------
+    ndarray of shape (K, 3)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._array.geometry import departures
+    >>> ego = (np.eye(3), np.array([1.0, 0.0, 0.0]))
+    >>> departures(np.zeros((1, 3)), np.eye(3)[None], np.array([[1.0, 2.0, 0.0]]), ego)
+    array([[0., 2., 0.]])
+    """
+    own = np.einsum("kij,kj->ki", rotations, points) + translations
+    return own - (points @ ego[0].T + ego[1])
 
 
 def residuals(a, b, rotations, translations, labels):

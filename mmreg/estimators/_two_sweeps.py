@@ -25,6 +25,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
 from mmreg._array.flow import rigid_flow
+from mmreg._array.geometry import departures
 from mmreg._array.grouping import group_bounds, group_centroids
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
@@ -1110,8 +1111,19 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         rest_normals = None
         if is_z_up_sweep(a):
             rest_normals = SurfaceNormals(at_rest[inside], resting, 10, self._workers())
-        search = (a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting, inside)
-        search = (*search, rest_normals)
+        search = (
+            a,
+            sweep,
+            islands2,
+            n_islands2,
+            context,
+            ego,
+            sigma,
+            at_rest,
+            resting,
+            inside,
+            rest_normals,
+        )
         reach = self.max_displacement_
         moving, rotations, translations, unexplained, explained = self._island_hypotheses(
             islands, n_islands, search, reach, rng
@@ -1189,8 +1201,19 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         it does not), whether the ego motion leaves most of its points unexplained, and
         the share of its points that its motion explains (where it moves).
         """
-        a, sweep, islands2, n_islands2, context, ego, sigma, at_rest, resting = search[:9]
-        inside, rest_normals = search[9:]
+        (
+            a,
+            sweep,
+            islands2,
+            n_islands2,
+            context,
+            ego,
+            sigma,
+            at_rest,
+            resting,
+            inside,
+            rest_normals,
+        ) = search
         _, tree, normals, _, _ = context
         starts = translation_starts(
             a,
@@ -1271,8 +1294,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         # search keeps what it finds: a sparse car's rings slide it past any bound.
         centroids, _ = group_centroids(a[chosen], islands[chosen], n_islands)
         centre = np.repeat(centroids, n_starts, axis=0)
-        moved = np.einsum("nij,nj->ni", result.rotations, centre) + result.translations
-        offset = moved - (centre @ ego[0].T + ego[1])
+        offset = departures(centre, result.rotations, result.translations, ego)
         if not last:
             valid &= ~(np.linalg.norm(offset, axis=1) > reach)
         if rest_normals is not None:

@@ -9,6 +9,7 @@ post) fits any other pole of a street as well as its own second view.
 
 import numpy as np
 
+from mmreg._array.geometry import departures
 from mmreg._array.moments import group_moments
 
 __all__ = ["ACROSS", "is_line", "slides_in_plane"]
@@ -57,9 +58,7 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     flat = spread[:, 0] < _FLATNESS * spread[:, 1]
     normal = axes[:, :, 0] @ ego[0].T  # where the ego motion turns the plane
     rotations, translations = motions
-    centre = moments.mean_a
-    own = np.einsum("kij,kj->ki", rotations, centre) + translations
-    displacement = own - (centre @ ego[0].T + ego[1])
+    displacement = departures(moments.mean_a, rotations, translations, ego)
     across = np.abs(np.einsum("ki,ki->k", displacement, normal))
     return flat & (across < ACROSS * np.linalg.norm(displacement, axis=1))
 
