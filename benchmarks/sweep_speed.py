@@ -65,7 +65,7 @@ STAGES = [
     ("island hypotheses (ICP)", two_sweeps, "multi_body_icp", "_island_hypotheses"),
     ("choosing island motions", two_sweeps, "choose_island_motions", None),
     ("slow movers", two_sweeps, "slow_movers", None),
-    ("EM (2 rounds)", _multi_model_registration.MultiModelRegistration, "fit", None),
+    ("EM", _multi_model_registration.MultiModelRegistration, "fit", None),
     ("object ICP (refine)", _REGISTRATION, "_refine", None),
     ("slides rejoin", two_sweeps, "_join_slides", None),
 ]

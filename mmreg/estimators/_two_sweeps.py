@@ -93,8 +93,7 @@ _WEAK_EVIDENCE_SIZES = 2.5
 _BODY_REACH = 0.6
 _BODY_MATCH = 0.01
 _MIN_BODY_POINTS = 10
-# Refinement mode with capture times: rounds of deskewing (with the last round's motions)
-# and ICP.
+# With capture times: rounds of deskewing (with the last round's motions) and ICP.
 _DESKEW_ROUNDS = 2
 
 
@@ -304,8 +303,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       nothing;
       :mod:`mmreg.sweeps._slow_movers`) and become islands of their own. The islands'
       motions become putative correspondences for ``estimator``; the static world keeps
-      the ego motion and the other clusters are refined as above. This repeats while the
-      labels change (at most ``max_rounds`` times): a multi-body ICP around the EM.
+      the ego motion and the other clusters are refined as above (with ``max_rounds``
+      above 1, this repeats while the labels change: a multi-body ICP around the EM).
       A cluster that only slides along its own surfaces, or that its motion shows at a
       new place with under a tenth of its points (:mod:`mmreg.sweeps._new_places`),
       then rejoins the static world.
@@ -346,8 +345,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Being a guess, ``"auto"`` is widened where the data ask: islands that neither
         the ego motion nor any motion within it explains search again twice as far
         (a slow ego car 0.5 s apart from a car 5 m on). A number is a bound.
-    max_rounds : int, default=2
-        Raw mode: most rounds of estimator and ICP.
+    max_rounds : int, default=1
+        Raw mode: most rounds of estimator and ICP (further rounds run while the labels
+        change). One: a second round, fed by the refined motions, found the same
+        objects on every real and generated pair we hold, at a sixth of the fit's time.
     raw_init : {"islands", "estimator"}, default="islands"
         Raw mode: the estimator's initial clusters. ``"islands"``: the islands (the first
         round, slow movers included) or the last round's clusters, whose motions made
@@ -518,7 +519,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         island_radius="auto",
         min_island_size=12,
         max_displacement="auto",
-        max_rounds=2,
+        max_rounds=1,
         raw_init="islands",
         ground="auto",
         random_state=None,
@@ -1308,7 +1309,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             n_islands,
             ego,
             motions,
-            valid.reshape(n_islands, n_starts),
+            valid.reshape(n_islands, n_starts) & ~fit.hopeless()[:, None],
             sigma,
             target,
             (resting, islands[inside], 0.5 * self.island_radius_),
@@ -1456,10 +1457,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             if static >= 0:
                 refine[static] = False
                 rotations[static], translations[static] = ego
-            # With capture times, one deskewing per round: the next round deskews with
-            # this one's motions.
+            # With capture times, two rounds of deskewing and ICP: the first deskews
+            # with the estimator's motions, the second with the first's ICP motions.
             rotations, translations, scales = self._refine(
-                a, labels, rotations, translations, refine, context, static, 1
+                a, labels, rotations, translations, refine, context, static, _DESKEW_ROUNDS
             )
             motions = (rotations, translations)
             self.n_rounds_ = round_

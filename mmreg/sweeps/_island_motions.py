@@ -244,7 +244,7 @@ def choose_island_motions(
         ``(n_islands * n_starts, 3)``: the ICP result of start ``s`` of island ``i`` at
         ``i * n_starts + s``.
     valid : ndarray of bool, shape (n_islands, n_starts)
-        Which starts exist.
+        Which starts to judge (an island with none keeps the ego motion).
     scale : float
         Residual scale of the ego motion (point-to-plane), the likelihood's scale.
     target : tuple
@@ -273,8 +273,11 @@ def choose_island_motions(
         fit = ego_fit(points, groups, n_islands, ego, scale, target, max_distance=max_distance)
     scale = _likelihood_scale(scale)
     static_cost, sizes, static_inliers = fit
-    rows = np.repeat(np.arange(len(points)), n_starts)
-    index = groups[rows] * n_starts + np.tile(np.arange(n_starts), len(points))
+    # Only islands with a start to judge are weighed (most of the static world has
+    # none: the ego motion explains it too well for any alternative to win).
+    open_points = np.flatnonzero(valid.any(axis=1)[groups])
+    rows = np.repeat(open_points, n_starts)
+    index = groups[rows] * n_starts + np.tile(np.arange(n_starts), len(open_points))
     moved = np.einsum("nij,nj->ni", rotations[index], points[rows]) + translations[index]
     cost, foot = point_costs(moved, target, max_distance=max_distance, scale=scale)
     n_pairs = n_islands * n_starts
