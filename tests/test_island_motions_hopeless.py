@@ -41,18 +41,27 @@ def test_no_island_the_ego_motion_explains_can_be_chosen(seed, shift, unseen):
     valid = np.ones((n_islands, n_starts), dtype=bool)
     resting = cKDTree(a)
     hopeless = ego_fit(a, groups, n_islands, ego, 0.005, target, max_distance=1.0).hopeless()
-    moving, _, _ = choose_island_motions(
-        a,
-        groups,
-        n_islands,
-        ego,
-        (rotations, translations),
-        valid,
-        0.005,
-        target,
-        (resting, groups, 0.05),
-        max_distance=1.0,
-    )
+    choice = [
+        choose_island_motions(
+            a,
+            groups,
+            n_islands,
+            ego,
+            (rotations, translations),
+            starts,
+            0.005,
+            target,
+            (resting, groups, 0.05),
+            max_distance=1.0,
+        )
+        for starts in (valid, valid & ~hopeless[:, None])
+    ]
+    moving, pick, explained = choice[0]
     assert hopeless[:2].all() and not hopeless[3:].any()
     assert moving[3:].all()
     assert not (moving & hopeless).any()
+    # So the hopeless islands need not be weighed at all (SweepRegistration leaves
+    # them out): the same islands move, with the same motions.
+    np.testing.assert_array_equal(choice[1][0], moving)
+    np.testing.assert_array_equal(choice[1][1][moving], pick[moving])
+    np.testing.assert_array_equal(choice[1][2][moving], explained[moving])

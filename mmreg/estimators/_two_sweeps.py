@@ -348,7 +348,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     max_rounds : int, default=1
         Raw mode: most rounds of estimator and ICP (further rounds run while the labels
         change). One: a second round, fed by the refined motions, found the same
-        objects on every real and generated pair we hold, at a sixth of the fit's time.
+        objects on every real and generated pair we hold, and cost a sixth of the fit.
     raw_init : {"islands", "estimator"}, default="islands"
         Raw mode: the estimator's initial clusters. ``"islands"``: the islands (the first
         round, slow movers included) or the last round's clusters, whose motions made
