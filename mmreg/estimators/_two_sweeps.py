@@ -16,6 +16,7 @@ the moving clusters are deskewed in the ICP (:mod:`mmreg.sweeps._deskew`).
 import copy
 import importlib.util
 from numbers import Integral, Real
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -223,6 +224,22 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     labels = np.where(slides[np.maximum(labels, 0)] & (labels >= 0), static, labels)
     labels = np.where(labels >= 0, index[np.maximum(labels, 0)], -1)
     return labels, tuple(values[kept] for values in motions), int(index[static])
+
+
+class _IslandSearch(NamedTuple):
+    """What every search for the islands' motions shares (see ``_island_hypotheses``)."""
+
+    a: np.ndarray  # the first sweep
+    sweep: np.ndarray  # the second sweep
+    islands2: np.ndarray  # the second sweep's islands
+    n_islands2: int
+    context: tuple  # (sweep, its tree, its SurfaceNormals, random state, capture times)
+    ego: tuple  # (R, t) at which the islands are tested
+    sigma: float  # the ego ICP's robust residual scale
+    at_rest: np.ndarray  # the first sweep where the ego motion puts it
+    resting: cKDTree  # of at_rest[inside]
+    inside: np.ndarray  # the first sweep's points that lie on an island
+    rest_normals: SurfaceNormals | None  # of at_rest[inside]; None unless z-up sweeps
 
 
 def _check_features(X):
@@ -1112,7 +1129,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         rest_normals = None
         if is_z_up_sweep(a):
             rest_normals = SurfaceNormals(at_rest[inside], resting, 10, self._workers())
-        search = (
+        search = _IslandSearch(
             a,
             sweep,
             islands2,
@@ -1195,34 +1212,21 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
 
         The ICPs start within ``reach`` and, but in the ``last`` search, end there.
 
-        ``search`` holds what every search shares (the sweeps, the second sweep's islands,
-        the ego motion and its scale, the first sweep at rest, its tree and, in z-up
-        sweeps, its normals; see :meth:`_island_motions`). Returns
+        ``search`` holds what every search shares (:class:`_IslandSearch`). Returns
         whether each island moves, its rotation and translation (the ego motion's where
         it does not), whether the ego motion leaves most of its points unexplained, and
         the share of its points that its motion explains (where it moves).
         """
-        (
-            a,
-            sweep,
-            islands2,
-            n_islands2,
-            context,
-            ego,
-            sigma,
-            at_rest,
-            resting,
-            inside,
-            rest_normals,
-        ) = search
-        _, tree, normals, _, _ = context
+        a, sweep, ego, sigma = search.a, search.sweep, search.ego, search.sigma
+        at_rest, inside, rest_normals = search.at_rest, search.inside, search.rest_normals
+        _, tree, normals, _, _ = search.context
         starts = translation_starts(
             a,
             islands,
             n_islands,
             sweep,
-            islands2,
-            n_islands2,
+            search.islands2,
+            search.n_islands2,
             ego,
             max_displacement=reach,
             bin_size=_BIN * self.max_distance_,
@@ -1270,7 +1274,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             )
             hidden[open_] &= ~through[islands[chosen[open_]]]
             fit = fit.with_hidden(islands[chosen], hidden)
-        pair = np.where(valid[pair] & ~fit.hopeless()[islands[rows]], pair, -1)
+        hopeless = fit.hopeless()
+        pair = np.where(valid[pair] & ~hopeless[islands[rows]], pair, -1)
         n_pairs = n_islands * n_starts
         rotations = np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy()
         translations = ego[1] + np.nan_to_num(starts).reshape(n_pairs, 3)
@@ -1309,10 +1314,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             n_islands,
             ego,
             motions,
-            valid.reshape(n_islands, n_starts) & ~fit.hopeless()[:, None],
+            valid.reshape(n_islands, n_starts) & ~hopeless[:, None],
             sigma,
             target,
-            (resting, islands[inside], 0.5 * self.island_radius_),
+            (search.resting, islands[inside], 0.5 * self.island_radius_),
             max_distance=self.max_distance_,
             fit=fit,
         )
