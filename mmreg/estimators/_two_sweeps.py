@@ -14,6 +14,7 @@ the moving clusters are deskewed in the ICP (:mod:`mmreg.sweeps._deskew`).
 """
 
 import copy
+import functools
 import importlib.util
 from numbers import Integral, Real
 from typing import NamedTuple
@@ -1199,6 +1200,22 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             tol=_TOL * self.max_distance_,
             random_state=rng,
             moved=at_rest,
+            # A seed apart from everything else that fails from the ego motion starts
+            # again where an island would (a copy of the random state: the steps after
+            # draw alike whether or not a seed does).
+            starts=functools.partial(
+                translation_starts,
+                a,
+                sweep=sweep,
+                islands2=search.islands2,
+                n_islands2=search.n_islands2,
+                ego=ego,
+                max_displacement=self.max_displacement_,
+                bin_size=_BIN * self.max_distance_,
+                random_state=copy.deepcopy(rng),
+                moved=at_rest,
+            ),
+            max_grade=None if rest_normals is None else _MAX_GRADE,
         )
         if len(slow_rotations):
             islands = np.where(slow >= 0, n_islands + slow, islands)

@@ -19,7 +19,14 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
    The unexplained points that no moving island holds are cut into tight islands
    (voxels of side ``cell``, half the islands').
 2. **Motion**: every seed is aligned to the second sweep by the robust multi-body ICP
-   (:mod:`mmreg.sweeps._icp`), started at the ego motion.
+   (:mod:`mmreg.sweeps._icp`), started at the ego motion. A seed that fails the tests
+   below from there but is a thing apart (it holds at least half of its island of
+   ``cell`` voxels, and is not a line) starts again from its own translation starts
+   (the caller's ``starts``, as the islands' search makes them) and keeps the start that
+   passes the tests, climbs no steeper than ``max_grade`` and explains most of it: a
+   walker 1 m beside a pole shares the pole's island, whose motion the pole decides
+   (it slides along itself), and at 2 Hz it moves 0.7 m, beyond the reach of an ICP
+   started at the ego motion.
 3. **Tests** (all must hold):
 
    * *residual drop*: at least 60% of the seed's points are explained after the ICP,
@@ -46,11 +53,16 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
    stays with the static world.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 
+from mmreg._array.geometry import departures
+from mmreg._array.grouping import group_centroids
 from mmreg._array.motion import _group_median
 from mmreg._array.unique_rows import unique_rows
+from mmreg.sweeps._ambiguous_shapes import is_line
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._islands import voxel_islands
 
@@ -79,6 +91,9 @@ _MAX_RESTING = 0.5
 _NEIGHBOURS = 8
 _JOIN = 0.5
 _GROWTH_STEPS = 10
+# A seed that the ego start fails starts again where it holds this share of its cell
+# island.
+_DETACHED = 0.5
 
 
 def _spacing_ratio(points, tree, sweep, normals=None):
@@ -188,6 +203,8 @@ def slow_movers(
     tol,
     random_state,
     moved=None,
+    starts=None,
+    max_grade=None,
 ):
     """Small objects that move by a few sampling spacings, found point by point.
 
@@ -217,6 +234,16 @@ def slow_movers(
     random_state : RandomState
     moved : ndarray of shape (n, 3) or None
         ``a`` moved by the ego motion, when the caller has it already.
+    starts : callable or None, default=None
+        ``starts(groups, n_groups)``: translations ``(n_groups, n_starts, 3)`` added to
+        the ego motion's (NaN: none; the first, the ego motion's own, is skipped), from
+        which the seeds that fail from the ego motion start again, e.g.
+        :func:`mmreg.sweeps._island_motions.translation_starts` with the rest of its
+        arguments given. None: the ego motion only.
+    max_grade : float or None, default=None
+        Where the seeds start again, a motion that climbs steeper than this (height
+        over the horizontal distance, beyond the noise or the seed's spacing) is
+        refused: traffic moves along the ground. None: no test (sweeps not z-up).
 
     Returns
     -------
@@ -282,50 +309,168 @@ def slow_movers(
         measure=False,
     )
     R, t = result.rotations, result.translations
-    g = seeds[chosen]
-    after = np.einsum("nij,nj->ni", R[g], a[chosen]) + t[g]
-    ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep, normals)
-    explained = ratio_after * spacing <= _UNEXPLAINED * _own_spacing(moved[chosen], resting)
-    counts = np.maximum(np.bincount(g, minlength=n_seeds), 1)
-    share = np.bincount(g, weights=explained, minlength=n_seeds) / counts
-    departure = _group_median(np.linalg.norm(after - moved[chosen], axis=1), g, n_seeds)
-    seed_spacing = _group_median(spacing, g, n_seeds)
-    # The second sweep's points the seed lands on, and whether the first sweep at rest
-    # explains them, by the rule that chose the seeds (its spacing and planes measured
-    # among its own points): a body that moves less than its size lands partly on its
-    # old place, but its displaced faces lie off the old ones' planes.
-    pairs = unique_rows(np.column_stack([g[explained], landing[explained]]))
-    if len(pairs):
-        rest_normals = SurfaceNormals(resting.data, resting, _NORMAL_POINTS)
-        new, _ = _unexplained(sweep[pairs[:, 1]], resting, resting.data, rest_normals, scale)
-        at_rest = np.bincount(pairs[:, 0], weights=~new, minlength=n_seeds)
-        landed = np.bincount(pairs[:, 0], minlength=n_seeds)
-    else:
-        at_rest = landed = np.zeros(n_seeds)
-    new_place = (landed > 0) & (at_rest < _MAX_RESTING * np.maximum(landed, 1))
-    margin = np.maximum(_MIN_DEPARTURE * seed_spacing, _MIN_SCALES * scale)
-    accepted = np.flatnonzero(
-        (share >= _MIN_EXPLAINED) & (departure > margin) & new_place & (counts >= min_size)
-    )
+    own = _own_spacing(moved[chosen], resting)
+    rest_normals = SurfaceNormals(resting.data, resting, _NORMAL_POINTS)
+    tests = _SeedTests(a, moved, target, resting, rest_normals, scale, min_size)
+    passed, _ = tests(chosen, seeds[chosen], n_seeds, (R, t), own)
+    cells = None  # the first sweep's islands of voxels of side ``cell``, when needed
+    if starts is not None and not passed.all():
+        cells, _ = voxel_islands(a, cell, 1)
+        # A thing apart that the ego start fails may move beyond that ICP's reach: a
+        # walker beside a pole shares the pole's island, whose motion the pole decides
+        # (it slides along itself). A line matches anywhere along itself.
+        retry = np.flatnonzero(
+            ~passed & _detached(seeds, n_seeds, cells) & ~is_line(a, seeds, n_seeds)
+        )
+        if len(retry):
+            icp = {"max_distance": max_distance, "max_iter": max_iter, "tol": tol}
+            found, motions = _restart(
+                chosen,
+                seeds,
+                retry,
+                starts(_renumbered(seeds, retry), len(retry)),
+                own,
+                ego,
+                tests,
+                icp,
+                max_grade,
+            )
+            R, t = R.copy(), t.copy()
+            R[retry[found]], t[retry[found]] = motions[0][found], motions[1][found]
+            passed[retry[found]] = True
+    accepted = np.flatnonzero(passed)
     if not len(accepted):
         return none
-    return _members(a, free, unexplained, seeds, accepted, R, t, target, cell, min_size)
+    if cells is None:
+        cells, _ = voxel_islands(a, cell, 1)
+    return _members(a, free, unexplained, seeds, accepted, R, t, target, cells, min_size)
 
 
-def _members(a, free, unexplained, seeds, accepted, R, t, target, cell, min_size):
+def _renumbered(seeds, subset):
+    """``seeds`` with the seeds of ``subset`` numbered ``0..len(subset)-1``, others -1."""
+    number = np.full(max(seeds.max() + 1, 1), -1, dtype=np.intp)
+    number[subset] = np.arange(len(subset))
+    return np.where(seeds >= 0, number[np.maximum(seeds, 0)], -1)
+
+
+def _restart(chosen, seeds, retry, offsets, own, ego, tests, icp, max_grade):
+    """The seeds ``retry`` aligned again from their translation starts ``offsets``.
+
+    Each keeps the start whose ICP passes every test (and, with ``max_grade``, does not
+    climb steeper: traffic moves along the ground) and explains most of its points.
+    Returns whether each found one, and its rotations and translations.
+    """
+    a, sweep, (_, tree, normals) = tests.a, tests.target[0], tests.target
+    n_retry, n_starts = offsets.shape[:2]
+    offsets = offsets.copy()
+    offsets[:, 0] = np.nan  # the ego start, tried already
+    number = _renumbered(seeds, retry)
+    again = np.flatnonzero(number[chosen] >= 0)
+    rows = np.repeat(chosen[again], n_starts)
+    pair = number[rows] * n_starts + np.tile(np.arange(n_starts), len(again))
+    valid = np.isfinite(offsets).all(axis=2).ravel()
+    n_pairs = n_retry * n_starts
+    result = multi_body_icp(
+        a[rows],
+        np.where(valid[pair], pair, -1),
+        np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy(),
+        ego[1] + np.nan_to_num(offsets).reshape(n_pairs, 3),
+        sweep,
+        tree=tree,
+        normals=normals,
+        measure=False,
+        **icp,
+    )
+    motions = (result.rotations, result.translations)
+    passed, share = tests(rows, pair, n_pairs, motions, np.repeat(own[again], n_starts))
+    if max_grade is not None:
+        groups = number[chosen[again]]
+        centre, _ = group_centroids(a[chosen[again]], groups, n_retry)
+        offset = departures(np.repeat(centre, n_starts, axis=0), *motions, ego)
+        climb = np.abs(offset[:, 2]) - max_grade * np.linalg.norm(offset[:, :2], axis=1)
+        noise = np.fmax(_MIN_SCALES * tests.scale, _group_median(own[again], groups, n_retry))
+        passed &= ~(climb > np.repeat(noise, n_starts))
+    score = np.where(passed & valid, share, -np.inf).reshape(n_retry, n_starts)
+    best = np.arange(n_retry) * n_starts + np.argmax(score, axis=1)
+    found = np.isfinite(score.max(axis=1))
+    return found, (motions[0][best], motions[1][best])
+
+
+class _SeedTests(NamedTuple):
+    """The tests of a slow mover (the module's step 3), and what they read."""
+
+    a: np.ndarray
+    moved: np.ndarray  # ``a`` moved by the ego motion
+    target: tuple  # (sweep, its cKDTree, its SurfaceNormals)
+    resting: cKDTree  # of the first sweep at rest
+    rest_normals: SurfaceNormals  # of the first sweep at rest
+    scale: float  # the ego ICP's robust residual scale
+    min_size: int
+
+    def __call__(self, rows, groups, n_groups, motions, own):
+        """Whether each group's motion passes, and the share of its points it explains.
+
+        ``rows`` of ``a`` in ``groups`` (``0..n_groups-1``); ``motions``: rotations and
+        translations per group; ``own``: the first sweep's spacing at each row.
+        """
+        sweep, tree, normals = self.target
+        rotations, translations = motions
+        after = np.einsum("nij,nj->ni", rotations[groups], self.a[rows]) + translations[groups]
+        ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep, normals)
+        explained = ratio_after * spacing <= _UNEXPLAINED * own
+        counts = np.maximum(np.bincount(groups, minlength=n_groups), 1)
+        share = np.bincount(groups, weights=explained, minlength=n_groups) / counts
+        moves = np.linalg.norm(after - self.moved[rows], axis=1)
+        departure = _group_median(moves, groups, n_groups)
+        group_spacing = _group_median(spacing, groups, n_groups)
+        # The second sweep's points the seed lands on, and whether the first sweep at
+        # rest explains them, by the rule that chose the seeds (its spacing and planes
+        # measured among its own points): a body that moves less than its size lands
+        # partly on its old place, but its displaced faces lie off the old ones' planes.
+        pairs = unique_rows(np.column_stack([groups[explained], landing[explained]]))
+        if len(pairs):
+            new, _ = _unexplained(
+                sweep[pairs[:, 1]], self.resting, self.resting.data, self.rest_normals, self.scale
+            )
+            at_rest = np.bincount(pairs[:, 0], weights=~new, minlength=n_groups)
+            landed = np.bincount(pairs[:, 0], minlength=n_groups)
+        else:
+            at_rest = landed = np.zeros(n_groups)
+        new_place = (landed > 0) & (at_rest < _MAX_RESTING * np.maximum(landed, 1))
+        margin = np.maximum(_MIN_DEPARTURE * group_spacing, _MIN_SCALES * self.scale)
+        passed = (
+            (share >= _MIN_EXPLAINED) & (departure > margin) & new_place & (counts >= self.min_size)
+        )
+        return passed, share
+
+
+def _most_common(keys, values):
+    """Each key, the value it pairs with most often (the smallest of equals) and how often."""
+    pairs, votes = unique_rows(np.column_stack([keys, values]), return_counts=True)
+    order = np.lexsort((-votes, pairs[:, 0]))
+    pairs, votes = pairs[order], votes[order]
+    first = np.r_[True, pairs[1:, 0] != pairs[:-1, 0]]
+    return pairs[first, 0], pairs[first, 1], votes[first]
+
+
+def _detached(seeds, n_seeds, cells):
+    """Whether each seed holds at least half of the cell island that holds most of it
+    (a thing apart, not the unexplained part of a larger surface)."""
+    inside = np.flatnonzero(seeds >= 0)
+    seed, cell, held = _most_common(seeds[inside], cells[inside])
+    detached = np.zeros(n_seeds, dtype=bool)
+    detached[seed] = held >= _DETACHED * np.bincount(cells)[cell]
+    return detached
+
+
+def _members(a, free, unexplained, seeds, accepted, R, t, target, islands, min_size):
     """Points of the accepted seeds' islands that their motion explains better."""
     n = len(a)
-    islands, _ = voxel_islands(a, cell, 1)
     # Every island goes to the accepted seed with the most points in it.
     in_seed = np.flatnonzero(np.isin(seeds, accepted))
-    pairs, votes = unique_rows(
-        np.column_stack([islands[in_seed], seeds[in_seed]]), return_counts=True
-    )
-    order = np.lexsort((-votes, pairs[:, 0]))
-    pairs = pairs[order]
-    first = np.r_[True, pairs[1:, 0] != pairs[:-1, 0]]
+    island, seed, _ = _most_common(islands[in_seed], seeds[in_seed])
     owner = np.full(islands.max() + 1, -1, dtype=np.intp)
-    owner[pairs[first, 0]] = pairs[first, 1]
+    owner[island] = seed
     rows = np.flatnonzero(free & (owner[islands] >= 0))
     k = owner[islands[rows]]
     moved = np.einsum("nij,nj->ni", R[k], a[rows]) + t[k]
