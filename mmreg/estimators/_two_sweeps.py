@@ -50,6 +50,7 @@ from mmreg.sweeps._island_motions import (
 )
 from mmreg.sweeps._islands import voxel_islands
 from mmreg.sweeps._new_places import MIN_NEW_PLACE, new_place_shares
+from mmreg.sweeps._slow_movers import _UNEXPLAINED as _EXPLAINED_SPACINGS
 from mmreg.sweeps._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
 
 __all__ = ["SweepRegistration"]
@@ -71,6 +72,12 @@ _LENGTHS_PER_TAU = {"max_distance": 0.2, "island_radius": 0.1, "max_displacement
 # the static world) by fewer than this many of the ego ICP's robust residual scales only
 # slides along them (see _join_slides).
 _SLIDE_SCALES = 3.0
+# Raw mode: a moving island is refused when the ego motion explains at least this share
+# of a part of it and its own motion this share of the part's points fewer (a pole that
+# a walker's motion takes along: 0.85 and 0.83-0.86 fewer; a sparse walker's rings, of
+# fewer points than the parts asked for, 1.0 and 0.17-0.5 fewer).
+_TORN_EXPLAINED = 0.5
+_TORN_LOSS = 0.2
 # Raw mode: the ego ICP's motion replaces GICP's when its robust residual scale is below
 # this share of GICP's (see SweepRegistration._ego_motion). Measured ratios: 0.89-1.02
 # on real and ray-cast sweeps (GICP the more accurate), 0.47-0.52 on sparse resampled
@@ -241,6 +248,46 @@ class _IslandSearch(NamedTuple):
     resting: cKDTree  # of at_rest[inside]
     inside: np.ndarray  # the first sweep's points that lie on an island
     rest_normals: SurfaceNormals | None  # of at_rest[inside]; None unless z-up sweeps
+
+
+def _torn_islands(a, islands, n_islands, moving, motions, ego, target, cell, min_size):
+    """Moving islands that hold a part their motion explains clearly worse than the ego
+    motion does.
+
+    A part is an island of voxels of side ``cell`` of at least ``min_size`` points
+    within a moving island. A point is explained within 2 of the second sweep's
+    sampling spacings of a point of it (the slow movers' rule). Torn: the ego motion
+    explains at least half of a part's points, and the island's motion a fifth of the
+    part's points fewer. A point-to-plane cost, which chose the motion, cannot see it:
+    a thin pole moved half a metre keeps points near some plane.
+    """
+    rows = np.flatnonzero((islands >= 0) & moving[np.maximum(islands, 0)])
+    torn = np.zeros(n_islands, dtype=bool)
+    parts, n_parts = voxel_islands(a[rows], cell, 1)
+    if n_parts < 2:
+        return torn
+    owner = islands[rows]
+    sweep, tree, normals = target
+    rotations, translations = motions
+    own = np.einsum("nij,nj->ni", rotations[owner], a[rows]) + translations[owner]
+    rest = a[rows] @ ego[0].T + ego[1]
+    sizes = np.bincount(parts, minlength=n_parts)
+    shares = [
+        np.bincount(
+            parts,
+            weights=_spacing_ratio(moved, tree, sweep, normals)[0] <= _EXPLAINED_SPACINGS,
+            minlength=n_parts,
+        )
+        / np.maximum(sizes, 1)
+        for moved in (rest, own)
+    ]
+    worse = (
+        (sizes >= min_size) & (shares[0] >= _TORN_EXPLAINED) & (shares[1] < shares[0] - _TORN_LOSS)
+    )
+    part_owner = np.zeros(n_parts, dtype=np.intp)
+    part_owner[parts] = owner
+    torn[part_owner[worse]] = True
+    return torn
 
 
 def _check_features(X):
@@ -1182,6 +1229,24 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 rotations[where[found]], translations[where[found]] = sub_r[found], sub_t[found]
                 explained[where[found]] = sub_explained[found]
                 unexplained[where] = sub_unexplained
+        # An island's motion must not explain a part of it clearly worse than the ego
+        # motion does: a walker beside a pole shares its island, whose ICP may follow
+        # the walker and take the pole along. Refused, the island stays at rest and the
+        # walker is found point by point (below).
+        if moving.any():
+            torn = _torn_islands(
+                a,
+                islands,
+                n_islands,
+                moving,
+                (rotations, translations),
+                ego,
+                (sweep, tree, normals),
+                0.5 * self.island_radius_,
+                int(np.ceil(_WEAK_EVIDENCE_SIZES * self.min_island_size)),
+            )
+            moving &= ~torn
+            rotations[torn], translations[torn] = ego
         # Objects that move by a few sampling spacings stay within the ego motion's
         # band and often share an island with a static structure: found point by point
         # among the points no moving island holds, they become islands of their own.
