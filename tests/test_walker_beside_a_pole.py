@@ -1,4 +1,5 @@
-"""A walker beside a pole, in raw sweeps 0.5 s apart: found, the pole left at rest.
+"""A walker beside a pole or a parked car, in raw sweeps 0.5 s apart: found, the pole left
+at rest.
 
 Within an island's radius of each other, the walker and the pole share one island. The
 pole holds most of it and slides along itself, so that no motion of the whole island
@@ -15,20 +16,26 @@ import pytest
 from mmreg import SweepRegistration
 from mmreg.datasets._lidar import _ELEVATION, _sweep, _yaw
 
-_POLE = np.array([9.0, 7.0, 2.5])
+_POLE = (np.array([9.0, 7.0, 2.5]), 0.0, np.array([0.08, 0.08, 2.5]))
+_CAR = (np.array([9.0, 7.0, 0.75]), 0.0, np.array([2.2, 0.9, 0.45]))  # parked
 _WALKER = np.array([0.25, 0.2, 0.85])  # half sizes
 
 
-def _street(heading, gap=1.0, seed=0):
-    """Two 64-beam sweeps 0.5 s apart: buildings, a pole, a walker ``gap`` metres from it."""
+def _street(heading, gap=1.0, thing=_POLE, seed=0):
+    """Two 64-beam sweeps 0.5 s apart: buildings, a static thing and a walker ``gap``
+    metres from it (from the pole's axis, from the car's side)."""
     rng = np.random.RandomState(seed)
     boxes = [
         (np.array([x, side * 16.0, 5.0]), 0.05 * side, np.array([12.0, 4.0, 5.0]))
         for side in (-1.0, 1.0)
         for x in (-40.0, -12.0, 16.0, 44.0)
     ]
-    boxes.append((_POLE, 0.0, np.array([0.08, 0.08, 2.5])))
-    walker = _POLE + gap * np.array([-np.cos(0.8), np.sin(0.8), 0.0])
+    boxes.append(thing)
+    centre, _, half = thing
+    if thing is _POLE:
+        walker = centre + gap * np.array([-np.cos(0.8), np.sin(0.8), 0.0])
+    else:  # on the street's side of the car
+        walker = centre - [0.0, half[1] + gap, 0.0]
     walker[2] = _WALKER[2]
     step = 0.7 * np.array([np.cos(heading), np.sin(heading), 0.0])  # 1.4 m/s
     elevations = np.linspace(*_ELEVATION, 64)
@@ -77,4 +84,17 @@ def test_an_island_motion_that_takes_the_pole_along_is_refused(heading, gap):
         ((est.labels_ == c) & walker).sum() / ((est.labels_ == c) | walker).sum() for c in moving
     ]
     assert max(iou, default=0.0) > 0.8
+    assert [c for c in moving if static[est.labels_ == c].mean() > 0.5] == []
+
+
+def test_a_walker_beside_a_parked_car_is_found():
+    # 0.6 m from the car's side the walker shares its island and the cells of its
+    # points; at half the cells' side it is a thing apart, and starts again.
+    a, sweep, walker, static = _street(np.radians(90), gap=0.6, thing=_CAR)
+    est = SweepRegistration(random_state=0).fit(a, sweep=sweep)
+    moving = np.flatnonzero(est.moving_)
+    iou = [
+        ((est.labels_ == c) & walker).sum() / ((est.labels_ == c) | walker).sum() for c in moving
+    ]
+    assert max(iou, default=0.0) > 0.5
     assert [c for c in moving if static[est.labels_ == c].mean() > 0.5] == []

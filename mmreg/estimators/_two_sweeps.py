@@ -1280,6 +1280,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 random_state=copy.deepcopy(rng),
                 moved=at_rest,
             ),
+            reach=self.max_displacement_,
             max_grade=None if rest_normals is None else _MAX_GRADE,
         )
         if len(slow_rotations):

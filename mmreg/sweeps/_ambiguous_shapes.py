@@ -12,7 +12,7 @@ import numpy as np
 from mmreg._array.geometry import departures
 from mmreg._array.moments import group_moments
 
-__all__ = ["ACROSS", "is_line", "slides_in_plane"]
+__all__ = ["ACROSS", "is_flat", "is_line", "slides_in_plane"]
 
 # Flat: the smallest spread (variance) of the island's points under this share of the
 # middle one; a line: the middle one under this share of the largest.
@@ -54,13 +54,41 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     >>> slides_in_plane(np.vstack([patch, patch]), groups, 2, (rotations, translations), ego)
     array([ True, False])
     """
-    moments, spread, axes = _principal_axes(points, groups, n_groups)
-    flat = spread[:, 0] < _FLATNESS * spread[:, 1]
+    moments, _, axes = _principal_axes(points, groups, n_groups)
+    flat = is_flat(points, groups, n_groups)
     normal = axes[:, :, 0] @ ego[0].T  # where the ego motion turns the plane
     rotations, translations = motions
     displacement = departures(moments.mean_a, rotations, translations, ego)
     across = np.abs(np.einsum("ki,ki->k", displacement, normal))
     return flat & (across < ACROSS * np.linalg.norm(displacement, axis=1))
+
+
+def is_flat(points, groups, n_groups):
+    """Whether each group's points lie in a plane (the smallest spread is small).
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+    groups : ndarray of shape (n,)
+        Group of every point in ``0..n_groups-1`` (negative: none).
+    n_groups : int
+
+    Returns
+    -------
+    flat : ndarray of bool, shape (n_groups,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.sweeps._ambiguous_shapes import is_flat
+    >>> rng = np.random.default_rng(0)
+    >>> wall = np.c_[rng.uniform(0, 3, (50, 2)), rng.normal(0, 0.01, 50)]
+    >>> box = rng.uniform(0, 1, (50, 3))
+    >>> is_flat(np.vstack([wall, box]), np.repeat([0, 1], 50), 2)
+    array([ True, False])
+    """
+    _, spread, _ = _principal_axes(points, groups, n_groups)
+    return spread[:, 0] < _FLATNESS * spread[:, 1]
 
 
 def is_line(points, groups, n_groups):

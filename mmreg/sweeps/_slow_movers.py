@@ -20,13 +20,14 @@ ICP from the ego motion; unlike it, a static piece must not get a motion of its 
    (voxels of side ``cell``, half the islands').
 2. **Motion**: every seed is aligned to the second sweep by the robust multi-body ICP
    (:mod:`mmreg.sweeps._icp`), started at the ego motion. A seed that fails the tests
-   below from there but is a thing apart (it holds at least half of its island of
-   ``cell`` voxels, and is not a line) starts again from its own translation starts
+   below from there but is a thing apart starts again from its own translation starts
    (the caller's ``starts``, as the islands' search makes them) and keeps the start that
-   passes the tests, climbs no steeper than ``max_grade`` and explains most of it: a
-   walker 1 m beside a pole shares the pole's island, whose motion the pole decides
-   (it slides along itself), and at 2 Hz it moves 0.7 m, beyond the reach of an ICP
-   started at the ego motion.
+   passes the tests, ends within ``reach``, climbs no steeper than ``max_grade`` and
+   explains most of it. Apart: it holds at least half of its island of ``cell``
+   voxels, or, if it is not flat, of voxels of half that side; and it is not a line. A
+   walker 1 m beside a pole shares the pole's island, whose motion the pole decides (it
+   slides along itself), and at 2 Hz it moves 0.7 m, beyond the reach of an ICP started
+   at the ego motion; 0.6 m from a parked car it shares even the car's ``cell`` island.
 3. **Tests** (all must hold):
 
    * *residual drop*: at least 60% of the seed's points are explained after the ICP,
@@ -62,7 +63,7 @@ from mmreg._array.geometry import departures
 from mmreg._array.grouping import group_centroids
 from mmreg._array.motion import _group_median
 from mmreg._array.unique_rows import unique_rows
-from mmreg.sweeps._ambiguous_shapes import is_line
+from mmreg.sweeps._ambiguous_shapes import is_flat, is_line
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._islands import voxel_islands
 
@@ -91,9 +92,10 @@ _MAX_RESTING = 0.5
 _NEIGHBOURS = 8
 _JOIN = 0.5
 _GROWTH_STEPS = 10
-# A seed that the ego start fails starts again where it holds this share of its cell
-# island.
+# A seed that the ego start fails starts again where it holds this share of its island
+# of ``cell`` voxels or, if it is not flat, of voxels of _APART times that side.
 _DETACHED = 0.5
+_APART = 0.5
 
 
 def _spacing_ratio(points, tree, sweep, normals=None):
@@ -204,6 +206,7 @@ def slow_movers(
     random_state,
     moved=None,
     starts=None,
+    reach=np.inf,
     max_grade=None,
 ):
     """Small objects that move by a few sampling spacings, found point by point.
@@ -240,6 +243,10 @@ def slow_movers(
         which the seeds that fail from the ego motion start again, e.g.
         :func:`mmreg.sweeps._island_motions.translation_starts` with the rest of its
         arguments given. None: the ego motion only.
+    reach : float, default=inf
+        Where the seeds start again, a motion that ends farther than this from the ego
+        motion (the seed's centroid) is refused, as an island's is (the starts lie
+        within it).
     max_grade : float or None, default=None
         Where the seeds start again, a motion that climbs steeper than this (height
         over the horizontal distance, beyond the noise or the seed's spacing) is
@@ -315,12 +322,21 @@ def slow_movers(
     passed, _ = tests(chosen, seeds[chosen], n_seeds, (R, t), own)
     cells = None  # the first sweep's islands of voxels of side ``cell``, when needed
     if starts is not None and not passed.all():
-        cells, _ = voxel_islands(a, cell, 1)
         # A thing apart that the ego start fails may move beyond that ICP's reach: a
         # walker beside a pole shares the pole's island, whose motion the pole decides
-        # (it slides along itself). A line matches anywhere along itself.
+        # (it slides along itself). Apart at the seeds' voxel side, or at half of it if
+        # not flat: that keeps a walker 0.6 m from a parked car apart, but not a wall's
+        # piece that the sampling cuts off at a corner (matched 6 m away). A line
+        # matches anywhere along itself.
+        cells, _ = voxel_islands(a, cell, 1)
+        apart, _ = voxel_islands(a, _APART * cell, 1)
         retry = np.flatnonzero(
-            ~passed & _detached(seeds, n_seeds, cells) & ~is_line(a, seeds, n_seeds)
+            ~passed
+            & (
+                _detached(seeds, n_seeds, cells)
+                | (_detached(seeds, n_seeds, apart) & ~is_flat(a, seeds, n_seeds))
+            )
+            & ~is_line(a, seeds, n_seeds)
         )
         if len(retry):
             icp = {"max_distance": max_distance, "max_iter": max_iter, "tol": tol}
@@ -333,7 +349,7 @@ def slow_movers(
                 ego,
                 tests,
                 icp,
-                max_grade,
+                (reach, max_grade),
             )
             R, t = R.copy(), t.copy()
             R[retry[found]], t[retry[found]] = motions[0][found], motions[1][found]
@@ -353,13 +369,15 @@ def _renumbered(seeds, subset):
     return np.where(seeds >= 0, number[np.maximum(seeds, 0)], -1)
 
 
-def _restart(chosen, seeds, retry, offsets, own, ego, tests, icp, max_grade):
+def _restart(chosen, seeds, retry, offsets, own, ego, tests, icp, bounds):
     """The seeds ``retry`` aligned again from their translation starts ``offsets``.
 
-    Each keeps the start whose ICP passes every test (and, with ``max_grade``, does not
-    climb steeper: traffic moves along the ground) and explains most of its points.
-    Returns whether each found one, and its rotations and translations.
+    Each keeps the start whose ICP passes every test, ends within ``bounds``'s reach of
+    the ego motion (as an island's must) and, with its grade, climbs no steeper
+    (traffic moves along the ground), and explains most of its points. Returns whether
+    each found one, and its rotations and translations.
     """
+    reach, max_grade = bounds
     a, sweep, (_, tree, normals) = tests.a, tests.target[0], tests.target
     n_retry, n_starts = offsets.shape[:2]
     offsets = offsets.copy()
@@ -383,10 +401,11 @@ def _restart(chosen, seeds, retry, offsets, own, ego, tests, icp, max_grade):
     )
     motions = (result.rotations, result.translations)
     passed, share = tests(rows, pair, n_pairs, motions, np.repeat(own[again], n_starts))
+    groups = number[chosen[again]]
+    centre, _ = group_centroids(a[chosen[again]], groups, n_retry)
+    offset = departures(np.repeat(centre, n_starts, axis=0), *motions, ego)
+    passed &= ~(np.linalg.norm(offset, axis=1) > reach)
     if max_grade is not None:
-        groups = number[chosen[again]]
-        centre, _ = group_centroids(a[chosen[again]], groups, n_retry)
-        offset = departures(np.repeat(centre, n_starts, axis=0), *motions, ego)
         climb = np.abs(offset[:, 2]) - max_grade * np.linalg.norm(offset[:, :2], axis=1)
         noise = np.fmax(_MIN_SCALES * tests.scale, _group_median(own[again], groups, n_retry))
         passed &= ~(climb > np.repeat(noise, n_starts))
