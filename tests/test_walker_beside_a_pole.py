@@ -59,16 +59,22 @@ def _street(heading, gap=1.0, thing=_POLE, seed=0):
     return a, sweep, hit1 == len(boxes), hit1 < len(boxes)
 
 
-@pytest.mark.parametrize("heading", [90, 180])
-def test_a_walker_beside_a_pole_is_found_and_the_pole_stays(heading):
-    a, sweep, walker, static = _street(np.radians(heading))
+def _registered(heading, gap, thing=_POLE):
+    """The walker's best IoU with a moving cluster, and the static clusters called moving."""
+    a, sweep, walker, static = _street(np.radians(heading), gap=gap, thing=thing)
     est = SweepRegistration(random_state=0).fit(a, sweep=sweep)
     moving = np.flatnonzero(est.moving_)
     iou = [
         ((est.labels_ == c) & walker).sum() / ((est.labels_ == c) | walker).sum() for c in moving
     ]
-    assert max(iou, default=0.0) > 0.8
-    assert [c for c in moving if static[est.labels_ == c].mean() > 0.5] == []
+    return max(iou, default=0.0), [c for c in moving if static[est.labels_ == c].mean() > 0.5]
+
+
+@pytest.mark.parametrize("heading", [90, 180])
+def test_a_walker_beside_a_pole_is_found_and_the_pole_stays(heading):
+    iou, static_moving = _registered(heading, gap=1.0)
+    assert iou > 0.8
+    assert static_moving == []
 
 
 @pytest.mark.parametrize(("heading", "gap"), [(0, 1.4), (90, 1.4), (45, 1.0)])
@@ -77,24 +83,14 @@ def test_an_island_motion_that_takes_the_pole_along_is_refused(heading, gap):
     # the ego motion explains it. Taken as one, the island was a moving cluster of the
     # walker and the pole (IoU 0.4-0.5, and at 45 degrees a static cluster called
     # moving); refused, the walker is found point by point.
-    a, sweep, walker, static = _street(np.radians(heading), gap=gap)
-    est = SweepRegistration(random_state=0).fit(a, sweep=sweep)
-    moving = np.flatnonzero(est.moving_)
-    iou = [
-        ((est.labels_ == c) & walker).sum() / ((est.labels_ == c) | walker).sum() for c in moving
-    ]
-    assert max(iou, default=0.0) > 0.8
-    assert [c for c in moving if static[est.labels_ == c].mean() > 0.5] == []
+    iou, static_moving = _registered(heading, gap)
+    assert iou > 0.8
+    assert static_moving == []
 
 
 def test_a_walker_beside_a_parked_car_is_found():
     # 0.6 m from the car's side the walker shares its island and the cells of its
     # points; at half the cells' side it is a thing apart, and starts again.
-    a, sweep, walker, static = _street(np.radians(90), gap=0.6, thing=_CAR)
-    est = SweepRegistration(random_state=0).fit(a, sweep=sweep)
-    moving = np.flatnonzero(est.moving_)
-    iou = [
-        ((est.labels_ == c) & walker).sum() / ((est.labels_ == c) | walker).sum() for c in moving
-    ]
-    assert max(iou, default=0.0) > 0.5
-    assert [c for c in moving if static[est.labels_ == c].mean() > 0.5] == []
+    iou, static_moving = _registered(90, gap=0.6, thing=_CAR)
+    assert iou > 0.5
+    assert static_moving == []
