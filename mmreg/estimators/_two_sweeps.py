@@ -250,13 +250,14 @@ class _IslandSearch(NamedTuple):
     rest_normals: SurfaceNormals | None  # of at_rest[inside]; None unless z-up sweeps
 
 
-def _torn_islands(a, islands, n_islands, moving, motions, ego, target, cell, min_size):
+def _torn_islands(a, islands, n_islands, moving, motions, at_rest, target, cell, min_size):
     """Moving islands that hold a part their motion explains clearly worse than the ego
     motion does.
 
     A part is an island of voxels of side ``cell`` of at least ``min_size`` points
-    within a moving island. A point is explained within 2 of the second sweep's
-    sampling spacings of a point of it (the slow movers' rule). Torn: the ego motion
+    within a moving island; ``at_rest``: ``a`` moved by the ego motion. A point is
+    explained within 2 of the second sweep's sampling spacings of a point of it (the
+    slow movers' rule). Torn: the ego motion
     explains at least half of a part's points, and the island's motion a fifth of the
     part's points fewer. A point-to-plane cost, which chose the motion, cannot see it:
     a thin pole moved half a metre keeps points near some plane.
@@ -270,7 +271,6 @@ def _torn_islands(a, islands, n_islands, moving, motions, ego, target, cell, min
     sweep, tree, normals = target
     rotations, translations = motions
     own = np.einsum("nij,nj->ni", rotations[owner], a[rows]) + translations[owner]
-    rest = a[rows] @ ego[0].T + ego[1]
     sizes = np.bincount(parts, minlength=n_parts)
     shares = [
         np.bincount(
@@ -279,7 +279,7 @@ def _torn_islands(a, islands, n_islands, moving, motions, ego, target, cell, min
             minlength=n_parts,
         )
         / np.maximum(sizes, 1)
-        for moved in (rest, own)
+        for moved in (at_rest[rows], own)
     ]
     worse = (
         (sizes >= min_size) & (shares[0] >= _TORN_EXPLAINED) & (shares[1] < shares[0] - _TORN_LOSS)
@@ -1240,7 +1240,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 n_islands,
                 moving,
                 (rotations, translations),
-                ego,
+                at_rest,
                 (sweep, tree, normals),
                 0.5 * self.island_radius_,
                 int(np.ceil(_WEAK_EVIDENCE_SIZES * self.min_island_size)),

@@ -12,7 +12,7 @@ import numpy as np
 from mmreg._array.geometry import departures
 from mmreg._array.moments import group_moments
 
-__all__ = ["ACROSS", "is_flat", "is_line", "slides_in_plane"]
+__all__ = ["ACROSS", "is_line", "shapes", "slides_in_plane"]
 
 # Flat: the smallest spread (variance) of the island's points under this share of the
 # middle one; a line: the middle one under this share of the largest.
@@ -54,8 +54,8 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     >>> slides_in_plane(np.vstack([patch, patch]), groups, 2, (rotations, translations), ego)
     array([ True, False])
     """
-    moments, _, axes = _principal_axes(points, groups, n_groups)
-    flat = is_flat(points, groups, n_groups)
+    moments, spread, axes = _principal_axes(points, groups, n_groups)
+    flat = _flat(spread)
     normal = axes[:, :, 0] @ ego[0].T  # where the ego motion turns the plane
     rotations, translations = motions
     displacement = departures(moments.mean_a, rotations, translations, ego)
@@ -63,8 +63,11 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     return flat & (across < ACROSS * np.linalg.norm(displacement, axis=1))
 
 
-def is_flat(points, groups, n_groups):
-    """Whether each group's points lie in a plane (the smallest spread is small).
+def shapes(points, groups, n_groups):
+    """Whether each group's points lie in a plane, and whether along a line.
+
+    Flat: the smallest spread (variance) is under a twentieth of the middle one; a line:
+    the middle one under a twentieth of the largest. One pass over the groups' moments.
 
     Parameters
     ----------
@@ -75,35 +78,26 @@ def is_flat(points, groups, n_groups):
 
     Returns
     -------
-    flat : ndarray of bool, shape (n_groups,)
+    flat, line : ndarray of bool, shape (n_groups,)
 
     Examples
     --------
     >>> import numpy as np
-    >>> from mmreg.sweeps._ambiguous_shapes import is_flat
+    >>> from mmreg.sweeps._ambiguous_shapes import shapes
     >>> rng = np.random.default_rng(0)
     >>> wall = np.c_[rng.uniform(0, 3, (50, 2)), rng.normal(0, 0.01, 50)]
+    >>> pole = np.c_[rng.normal(0, 0.03, (50, 2)), rng.uniform(0, 4, 50)]
     >>> box = rng.uniform(0, 1, (50, 3))
-    >>> is_flat(np.vstack([wall, box]), np.repeat([0, 1], 50), 2)
-    array([ True, False])
+    >>> flat, line = shapes(np.vstack([wall, pole, box]), np.repeat([0, 1, 2], 50), 3)
+    >>> flat.tolist(), line.tolist()
+    ([True, False, False], [False, True, False])
     """
     _, spread, _ = _principal_axes(points, groups, n_groups)
-    return spread[:, 0] < _FLATNESS * spread[:, 1]
+    return _flat(spread), spread[:, 1] < _FLATNESS * spread[:, 2]
 
 
 def is_line(points, groups, n_groups):
-    """Whether each group's points lie along a line (the middle spread is small).
-
-    Parameters
-    ----------
-    points : ndarray of shape (n, 3)
-    groups : ndarray of shape (n,)
-        Group of every point in ``0..n_groups-1`` (negative: none).
-    n_groups : int
-
-    Returns
-    -------
-    line : ndarray of bool, shape (n_groups,)
+    """Whether each group's points lie along a line: the second answer of :func:`shapes`.
 
     Examples
     --------
@@ -115,8 +109,12 @@ def is_line(points, groups, n_groups):
     >>> is_line(np.vstack([pole, box]), np.repeat([0, 1], 50), 2)
     array([ True, False])
     """
-    _, spread, _ = _principal_axes(points, groups, n_groups)
-    return spread[:, 1] < _FLATNESS * spread[:, 2]
+    return shapes(points, groups, n_groups)[1]
+
+
+def _flat(spread):
+    """Whether the smallest of each row of ascending spreads is small beside the middle."""
+    return spread[:, 0] < _FLATNESS * spread[:, 1]
 
 
 def _principal_axes(points, groups, n_groups):

@@ -63,7 +63,7 @@ from mmreg._array.geometry import departures
 from mmreg._array.grouping import group_centroids
 from mmreg._array.motion import _group_median
 from mmreg._array.unique_rows import unique_rows
-from mmreg.sweeps._ambiguous_shapes import is_flat, is_line
+from mmreg.sweeps._ambiguous_shapes import shapes
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._islands import voxel_islands
 
@@ -330,13 +330,11 @@ def slow_movers(
         # matches anywhere along itself.
         cells, _ = voxel_islands(a, cell, 1)
         apart, _ = voxel_islands(a, _APART * cell, 1)
+        flat, line = shapes(a, seeds, n_seeds)
         retry = np.flatnonzero(
             ~passed
-            & (
-                _detached(seeds, n_seeds, cells)
-                | (_detached(seeds, n_seeds, apart) & ~is_flat(a, seeds, n_seeds))
-            )
-            & ~is_line(a, seeds, n_seeds)
+            & (_detached(seeds, n_seeds, cells) | (_detached(seeds, n_seeds, apart) & ~flat))
+            & ~line
         )
         if len(retry):
             icp = {"max_distance": max_distance, "max_iter": max_iter, "tol": tol}
