@@ -23,61 +23,18 @@ from pathlib import Path
 import numpy as np
 
 from mmreg import SweepRegistration
-from mmreg.datasets._lidar import _ELEVATION, _sweep, _yaw
+from mmreg.datasets._lidar import _BESIDE, _walker_beside
 
-# (centre, yaw, half sizes) of each thing, and the unit direction from it to the walker.
-THINGS = {
-    "pole": ((9.0, 7.0, 2.5), 0.0, (0.08, 0.08, 2.5), (-np.cos(0.8), np.sin(0.8))),
-    "bin": ((9.0, 7.0, 0.5), 0.3, (0.3, 0.3, 0.5), (-np.cos(0.8), np.sin(0.8))),
-    "parked car": ((9.0, 7.0, 0.75), 0.0, (2.2, 0.9, 0.45), (0.0, -1.0)),
-    "wall": ((9.0, 7.6, 1.5), 0.0, (4.0, 0.1, 1.5), (0.0, -1.0)),
-}
+THINGS = tuple(_BESIDE)
 GAPS = (0.6, 1.2)
 HEADINGS = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
-WALKER = np.array([0.25, 0.2, 0.85])  # half sizes
-
-
-def street(thing, heading, gap, seed=0):
-    """Two sweeps (sensor frames), the walker's and the static world's masks."""
-    rng = np.random.RandomState(seed)
-    boxes = [
-        (np.array([x, side * 16.0, 5.0]), 0.05 * side, np.array([12.0, 4.0, 5.0]))
-        for side in (-1.0, 1.0)
-        for x in (-40.0, -12.0, 16.0, 44.0)
-    ]
-    centre, yaw, half, away = THINGS[thing]
-    centre, half, away = np.array(centre), np.array(half), np.array(away)
-    boxes.append((centre, yaw, half))
-    # From the pole's or the bin's axis; from the car's or the wall's side.
-    edge = half[1] if thing in ("parked car", "wall") else 0.0
-    walker = np.r_[centre[:2] + away * (edge + gap), WALKER[2]]
-    step = 0.7 * np.array([np.cos(heading), np.sin(heading), 0.0])
-    elevations = np.linspace(*_ELEVATION, 64)
-    azimuths = np.linspace(-np.pi, np.pi, 2048, endpoint=False)
-    first = (np.eye(3), np.array([0.0, 0.0, 1.8]))
-    second = (_yaw(0.01), np.array([3.5, 0.0, 1.8]))
-    world1, hit1 = _sweep(
-        first, [*boxes, (walker, heading, WALKER)], elevations, azimuths, 70.0, 0.01, rng
-    )
-    world2, _ = _sweep(
-        second,
-        [*boxes, (walker + step, heading, WALKER)],
-        elevations,
-        azimuths + np.pi / 2048,
-        70.0,
-        0.01,
-        rng,
-    )
-    a = (world1 - first[1]) @ first[0]
-    sweep = (world2 - second[1]) @ second[0]
-    return a, sweep, hit1 == len(boxes), hit1 < len(boxes)
 
 
 def _row(thing):
     found, ious, static_moving, seconds = 0, [], 0, []
     for heading in HEADINGS:
         for gap in GAPS:
-            a, sweep, walker, static = street(thing, heading, gap)
+            a, sweep, walker, static = _walker_beside(thing, heading, gap)
             start = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

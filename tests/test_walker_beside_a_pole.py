@@ -14,54 +14,15 @@ import numpy as np
 import pytest
 
 from mmreg import SweepRegistration
-from mmreg.datasets._lidar import _ELEVATION, _sweep, _yaw
-
-_POLE = (np.array([9.0, 7.0, 2.5]), 0.0, np.array([0.08, 0.08, 2.5]))
-_CAR = (np.array([9.0, 7.0, 0.75]), 0.0, np.array([2.2, 0.9, 0.45]))  # parked
-_WALKER = np.array([0.25, 0.2, 0.85])  # half sizes
+from mmreg.datasets._lidar import _walker_beside
 
 
-def _street(heading, gap=1.0, thing=_POLE, seed=0):
-    """Two 64-beam sweeps 0.5 s apart: buildings, a static thing and a walker ``gap``
-    metres from it (from the pole's axis, from the car's side)."""
-    rng = np.random.RandomState(seed)
-    boxes = [
-        (np.array([x, side * 16.0, 5.0]), 0.05 * side, np.array([12.0, 4.0, 5.0]))
-        for side in (-1.0, 1.0)
-        for x in (-40.0, -12.0, 16.0, 44.0)
-    ]
-    boxes.append(thing)
-    centre, _, half = thing
-    if thing is _POLE:
-        walker = centre + gap * np.array([-np.cos(0.8), np.sin(0.8), 0.0])
-    else:  # on the street's side of the car
-        walker = centre - [0.0, half[1] + gap, 0.0]
-    walker[2] = _WALKER[2]
-    step = 0.7 * np.array([np.cos(heading), np.sin(heading), 0.0])  # 1.4 m/s
-    elevations = np.linspace(*_ELEVATION, 64)
-    azimuths = np.linspace(-np.pi, np.pi, 2048, endpoint=False)
-    first = (np.eye(3), np.array([0.0, 0.0, 1.8]))
-    second = (_yaw(0.01), np.array([3.5, 0.0, 1.8]))  # 7 m/s
-    world1, hit1 = _sweep(
-        first, [*boxes, (walker, heading, _WALKER)], elevations, azimuths, 70.0, 0.01, rng
-    )
-    world2, _ = _sweep(
-        second,
-        [*boxes, (walker + step, heading, _WALKER)],
-        elevations,
-        azimuths + np.pi / 2048,
-        70.0,
-        0.01,
-        rng,
-    )
-    a = (world1 - first[1]) @ first[0]
-    sweep = (world2 - second[1]) @ second[0]
-    return a, sweep, hit1 == len(boxes), hit1 < len(boxes)
+def _registered(heading, gap, thing="pole"):
+    """The walker's best IoU with a moving cluster, and the static clusters called moving.
 
-
-def _registered(heading, gap, thing=_POLE):
-    """The walker's best IoU with a moving cluster, and the static clusters called moving."""
-    a, sweep, walker, static = _street(np.radians(heading), gap=gap, thing=thing)
+    Two 64-beam sweeps 0.5 s apart; the walker walks 1.4 m/s towards ``heading`` (degrees)
+    ``gap`` metres from the pole's axis or the parked car's side."""
+    a, sweep, walker, static = _walker_beside(thing, np.radians(heading), gap)
     est = SweepRegistration(random_state=0).fit(a, sweep=sweep)
     moving = np.flatnonzero(est.moving_)
     iou = [
@@ -91,6 +52,6 @@ def test_an_island_motion_that_takes_the_pole_along_is_refused(heading, gap):
 def test_a_walker_beside_a_parked_car_is_found():
     # 0.6 m from the car's side the walker shares its island and the cells of its
     # points; at half the cells' side it is a thing apart, and starts again.
-    iou, static_moving = _registered(90, gap=0.6, thing=_CAR)
+    iou, static_moving = _registered(90, gap=0.6, thing="parked car")
     assert iou > 0.5
     assert static_moving == []

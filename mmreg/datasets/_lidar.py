@@ -379,3 +379,55 @@ def make_lidar_sweeps(
         flow=moved - a,
         interval=float(interval),
     )
+
+
+# One static thing at (9, 7) beside which a walker passes (the tests and
+# benchmarks/beside_static.py): centre, yaw, half sizes, and the unit direction from the
+# thing to the walker.
+_BESIDE = {
+    "pole": ((9.0, 7.0, 2.5), 0.0, (0.08, 0.08, 2.5), (-np.cos(0.8), np.sin(0.8))),
+    "bin": ((9.0, 7.0, 0.5), 0.3, (0.3, 0.3, 0.5), (-np.cos(0.8), np.sin(0.8))),
+    "parked car": ((9.0, 7.0, 0.75), 0.0, (2.2, 0.9, 0.45), (0.0, -1.0)),
+    "wall": ((9.0, 7.6, 1.5), 0.0, (4.0, 0.1, 1.5), (0.0, -1.0)),
+}
+
+
+def _walker_beside(thing, heading, gap, seed=0):
+    """Two 64-beam sweeps 0.5 s apart (the sensor at 7 m/s), a walker beside a thing.
+
+    Buildings on both sides, the road in, 1 cm range noise; one static ``thing`` of
+    :data:`_BESIDE` and a walker ``gap`` metres from it (from a pole's or a bin's axis,
+    from a car's or a wall's side), walking 1.4 m/s towards ``heading`` (radians).
+    Returns the two sweeps (sensor frames), and the walker's and the static world's
+    masks of the first.
+    """
+    rng = np.random.RandomState(seed)
+    boxes = [
+        (np.array([x, side * 16.0, 5.0]), 0.05 * side, np.array([12.0, 4.0, 5.0]))
+        for side in (-1.0, 1.0)
+        for x in (-40.0, -12.0, 16.0, 44.0)
+    ]
+    centre, yaw, half, away = (np.asarray(value) for value in _BESIDE[thing])
+    boxes.append((centre, float(yaw), half))
+    edge = half[1] if thing in ("parked car", "wall") else 0.0
+    walker = np.r_[centre[:2] + away * (edge + gap), _WALKER[2]]
+    step = 0.7 * np.array([np.cos(heading), np.sin(heading), 0.0])
+    elevations = np.linspace(*_ELEVATION, 64)
+    azimuths = np.linspace(-np.pi, np.pi, 2048, endpoint=False)
+    first = (np.eye(3), np.array([0.0, 0.0, 1.8]))
+    second = (_yaw(0.01), np.array([3.5, 0.0, 1.8]))
+    world1, hit1 = _sweep(
+        first, [*boxes, (walker, heading, _WALKER)], elevations, azimuths, 70.0, 0.01, rng
+    )
+    world2, _ = _sweep(
+        second,
+        [*boxes, (walker + step, heading, _WALKER)],
+        elevations,
+        azimuths + np.pi / 2048,
+        70.0,
+        0.01,
+        rng,
+    )
+    a = (world1 - first[1]) @ first[0]
+    sweep = (world2 - second[1]) @ second[0]
+    return a, sweep, hit1 == len(boxes), hit1 < len(boxes)
