@@ -5,6 +5,8 @@ import json
 import numpy as np
 import pytest
 from _surfaces import area_weighted_box
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sklearn.base import clone
 
 from mmreg import MultiModelRegistration, SweepRegistration
@@ -242,6 +244,40 @@ def test_voxel_islands_join_close_points_and_split_far_ones():
     small, n_small = voxel_islands(points, 0.05, min_size=5)
     assert np.all((small == -1) | (np.bincount(small[small >= 0])[small] >= 5))
     assert n_small == len(np.unique(small[small >= 0]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(1, 300),
+    spread=st.sampled_from([0.3, 2.0, 20.0]),
+    min_size=st.integers(1, 6),
+)
+def test_voxel_islands_are_the_components_of_touching_voxels(seed, n, spread, min_size):
+    """The reference: every pair of occupied voxels compared, touching when their indices
+    differ by at most 1 along every axis; islands numbered by their first point."""
+    from scipy.sparse.csgraph import connected_components
+
+    from mmreg.sweeps._islands import voxel_islands
+
+    rng = np.random.default_rng(seed)
+    # Clumps and gaps at several densities; the reference bins the points as the
+    # function does (voxels from the smallest coordinates), then compares every pair.
+    points = rng.integers(-5, 6, (n, 3)) * spread + rng.uniform(0.0, 1.0, (n, 3))
+    labels, n_islands = voxel_islands(points, 1.0, min_size)
+    cells = np.floor(points - points.min(axis=0)).astype(int)
+    touching = np.abs(cells[:, None, :] - cells[None, :, :]).max(axis=2) <= 1
+    _, component = connected_components(touching, directed=False)
+    sizes = np.bincount(component)
+    kept = sizes[component] >= min_size
+    _, first = np.unique(component, return_index=True)
+    order = [c for c in np.argsort(first) if sizes[c] >= min_size]
+    expected = np.full(n, -1)
+    for number, c in enumerate(order):
+        expected[component == c] = number
+    assert n_islands == len(order)
+    np.testing.assert_array_equal(labels, expected)
+    assert np.all(labels[~kept] == -1)
 
 
 # The first round's EM here alternates between two labellings of 55 of 4,000 rows (the
