@@ -39,6 +39,7 @@ from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
 from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
 from mmreg.sweeps._ego_motion import _RESIDUAL_POINTS as _EGO_RESIDUAL_POINTS
 from mmreg.sweeps._ego_motion import _residual_scale, ego_motion
+from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._island_motions import (
@@ -50,8 +51,7 @@ from mmreg.sweeps._island_motions import (
 )
 from mmreg.sweeps._islands import voxel_islands
 from mmreg.sweeps._new_places import MIN_NEW_PLACE, new_place_shares
-from mmreg.sweeps._slow_movers import _UNEXPLAINED as _EXPLAINED_SPACINGS
-from mmreg.sweeps._slow_movers import _spacing_ratio, beyond_spacing, slow_movers
+from mmreg.sweeps._slow_movers import beyond_spacing, slow_movers
 
 __all__ = ["SweepRegistration"]
 
@@ -202,7 +202,7 @@ def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
     counts = np.maximum(np.bincount(group, minlength=n_clusters), 1)
     evidence = np.sqrt(np.bincount(group, weights=along**2, minlength=n_clusters) / counts)
     sweep, tree, sweep_normals = target
-    _, _, spacing = _spacing_ratio(moved, tree, sweep, sweep_normals)
+    _, _, spacing = spacing_ratio(moved, tree, sweep, sweep_normals)
     departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
     # A cluster whose motion shows none of it at a new place slid onto static surfaces.
@@ -275,7 +275,7 @@ def _torn_islands(a, islands, n_islands, moving, motions, at_rest, target, cell,
     shares = [
         np.bincount(
             parts,
-            weights=_spacing_ratio(moved, tree, sweep, normals)[0] <= _EXPLAINED_SPACINGS,
+            weights=spacing_ratio(moved, tree, sweep, normals)[0] <= EXPLAINED_SPACINGS,
             minlength=n_parts,
         )
         / np.maximum(sizes, 1)

@@ -8,16 +8,16 @@ structure that an ICP slid along itself or onto a neighbouring surface (a pole o
 wall moved up or down by a ring gap, a building's edge seen from another place) lands
 on surfaces the first sweep held already: however well its new motion fits, it shows
 no new place. Both "explained" tests are the slow movers' rule
-(:func:`mmreg.sweeps._slow_movers._unexplained`: in units of the sweep's sampling
+(:func:`mmreg.sweeps._explained.unexplained_mask`: in units of the sweep's sampling
 spacing and of the ego ICP's robust residual scale), so nothing here is a length.
 """
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_mask
 from mmreg.sweeps._icp import SurfaceNormals
 from mmreg.sweeps._island_motions import _MIN_EXPLAINED
-from mmreg.sweeps._slow_movers import _UNEXPLAINED, _spacing_ratio, _unexplained
 
 __all__ = ["MIN_NEW_PLACE", "new_place_shares"]
 
@@ -114,15 +114,15 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach=None, w
     counts = np.bincount(labels[members], minlength=n_clusters)
     rest = rotations[static], translations[static]
     at_rest = first @ rest[0].T + rest[1]
-    unexplained, _ = _unexplained(
+    unexplained, _ = unexplained_mask(
         a[members] @ rest[0].T + rest[1], whole_tree, whole_sweep, whole_normals, scale
     )
     rows = members[unexplained]
     group = labels[rows]
     moved = np.einsum("nij,nj->ni", rotations[group], a[rows]) + translations[group]
     if reach is None:
-        ratio, landing, _ = _spacing_ratio(moved, tree, sweep, normals)
-        arrived = ratio <= _UNEXPLAINED
+        ratio, landing, _ = spacing_ratio(moved, tree, sweep, normals)
+        arrived = ratio <= EXPLAINED_SPACINGS
     else:
         distance, landing = tree.query(moved, distance_upper_bound=reach)
         arrived = np.isfinite(distance)
@@ -132,7 +132,7 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach=None, w
         places, inverse = np.unique(landing, return_inverse=True)
         rest_tree = cKDTree(at_rest)
         rest_normals = SurfaceNormals(at_rest, rest_tree, _NORMAL_POINTS)
-        new_place, _ = _unexplained(sweep[places], rest_tree, at_rest, rest_normals, scale)
+        new_place, _ = unexplained_mask(sweep[places], rest_tree, at_rest, rest_normals, scale)
         new = new_place[inverse.ravel()]
     shown = np.bincount(group, weights=new, minlength=n_clusters)
     present = counts > 0

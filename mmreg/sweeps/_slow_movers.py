@@ -64,15 +64,17 @@ from mmreg._array.grouping import group_centroids
 from mmreg._array.motion import _group_median
 from mmreg._array.unique_rows import unique_rows
 from mmreg.sweeps._ambiguous_shapes import shapes
+from mmreg.sweeps._explained import (
+    EXPLAINED_SPACINGS,
+    OFF_PLANE_SCALES,
+    spacing_ratio,
+    unexplained_mask,
+)
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 from mmreg.sweeps._islands import voxel_islands
 
 __all__ = ["beyond_spacing", "slow_movers"]
 
-# A point is unexplained beyond this many spacings from the second sweep.
-_UNEXPLAINED = 2.0
-# Neighbourhoods of the second sweep flatter than this are lines (no plane).
-_MIN_FLATNESS = 0.2
 # Points of the neighbourhoods whose PCA gives the first sweep's normals (as the ICP's).
 _NORMAL_POINTS = 10
 # Share of a seed's points the new motion must explain.
@@ -81,10 +83,9 @@ _MIN_EXPLAINED = 0.6
 # this many ego residual scales.
 _MIN_SPACINGS = 2.0
 # A slow mover's motion departs from the ego motion by more than this many spacings
-# (and _MIN_SCALES scales): a point that far and off its plane is one the seeds' rule
-# calls unexplained.
+# (and OFF_PLANE_SCALES scales): a point that far and off its plane is one the seeds'
+# rule calls unexplained.
 _MIN_DEPARTURE = 1.0
-_MIN_SCALES = 3.0
 # Largest share of the landing points that the first sweep at rest explains.
 _MAX_RESTING = 0.5
 # Members: points both motions explain join where half of their nearest neighbours
@@ -96,24 +97,6 @@ _GROWTH_STEPS = 10
 # of ``cell`` voxels or, if it is not flat, of voxels of _APART times that side.
 _DETACHED = 0.5
 _APART = 0.5
-
-
-def _spacing_ratio(points, tree, sweep, normals=None):
-    """Distance of each point to the sweep in units of the sweep's spacing there.
-
-    Also returns the index of the nearest sweep point and the spacing. ``normals``: the
-    sweep's :class:`mmreg.sweeps._icp.SurfaceNormals`, which keeps every spacing it finds
-    (these tests ask about the same sweep points again and again).
-    """
-    distance, nearest = tree.query(points)
-    if normals is not None:
-        spacing = normals.spacing(nearest)
-    else:
-        # Many points share their nearest sweep point: its spacing is found once.
-        unique, inverse = np.unique(nearest, return_inverse=True)
-        spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
-    spacing = np.maximum(spacing, np.finfo(float).tiny)
-    return distance / spacing, nearest, spacing
 
 
 def _own_spacing(points, tree):
@@ -155,38 +138,10 @@ def beyond_spacing(points, groups, n_groups, motions, ego, tree, sweep, normals=
     """
     rotations, translations = motions
     moved = np.einsum("nij,nj->ni", rotations[groups], points) + translations[groups]
-    _, _, spacing = _spacing_ratio(moved, tree, sweep, normals)
+    _, _, spacing = spacing_ratio(moved, tree, sweep, normals)
     resting = points @ ego[0].T + ego[1]
     departure = _group_median(np.linalg.norm(moved - resting, axis=1), groups, n_groups)
     return departure > _MIN_SPACINGS * _group_median(spacing, groups, n_groups)
-
-
-def _unexplained(points, tree, sweep, normals, scale):
-    """Whether the second sweep leaves each point unexplained, and the distance ratio.
-
-    Unexplained: more than ``_UNEXPLAINED`` spacings from the nearest point of the
-    sweep and, where the sweep's neighbourhood there is a surface, more than one
-    spacing off its plane (a point of a surface the other sweep saw elsewhere, e.g.
-    behind a moving object, lies on the plane but far from its points); or, where the
-    sweep is a surface, more than one spacing from its nearest point and more than
-    ``_MIN_SCALES`` robust residual scales (``scale``, the ego ICP's point-to-plane
-    noise) off its plane. The second rule sees a body that moves less than two
-    spacings towards or away from its surface's normal (a pedestrian walking 0.1 m
-    where the sweep samples every 6 cm): the nearest point is still close, but the
-    surface is displaced by many times the noise. Within one spacing of a point of the
-    sweep, a point is explained whatever the plane says (edges, curved surfaces).
-    """
-    ratio, nearest, spacing = _spacing_ratio(points, tree, sweep, normals)
-    far = np.flatnonzero(ratio > 1.0)
-    unexplained = np.zeros(len(points), dtype=bool)
-    if len(far):
-        normal, _, flatness = normals(nearest[far])
-        along = np.abs(np.einsum("ni,ni->n", normal, points[far] - sweep[nearest[far]]))
-        line = flatness < _MIN_FLATNESS
-        beyond = ratio[far] > _UNEXPLAINED
-        off_plane = ~line & (along > _MIN_SCALES * scale)
-        unexplained[far] = (beyond & (line | (along > spacing[far]))) | off_plane
-    return unexplained, ratio
 
 
 def slow_movers(
@@ -291,7 +246,7 @@ def slow_movers(
     none = (np.full(n, -1, dtype=np.intp), np.zeros((0, 3, 3)), np.zeros((0, 3)))
     if moved is None:
         moved = a @ ego[0].T + ego[1]
-    unexplained, _ = _unexplained(moved, tree, sweep, normals, scale)
+    unexplained, _ = unexplained_mask(moved, tree, sweep, normals, scale)
     candidates = np.flatnonzero(free & unexplained)
     if len(candidates) < min_size:
         return none
@@ -405,7 +360,7 @@ def _restart(chosen, seeds, retry, offsets, own, ego, tests, icp, bounds):
     passed &= ~(np.linalg.norm(offset, axis=1) > reach)
     if max_grade is not None:
         climb = np.abs(offset[:, 2]) - max_grade * np.linalg.norm(offset[:, :2], axis=1)
-        noise = np.fmax(_MIN_SCALES * tests.scale, _group_median(own[again], groups, n_retry))
+        noise = np.fmax(OFF_PLANE_SCALES * tests.scale, _group_median(own[again], groups, n_retry))
         passed &= ~(climb > np.repeat(noise, n_starts))
     score = np.where(passed & valid, share, -np.inf).reshape(n_retry, n_starts)
     best = np.arange(n_retry) * n_starts + np.argmax(score, axis=1)
@@ -433,8 +388,8 @@ class _SeedTests(NamedTuple):
         sweep, tree, normals = self.target
         rotations, translations = motions
         after = np.einsum("nij,nj->ni", rotations[groups], self.a[rows]) + translations[groups]
-        ratio_after, landing, spacing = _spacing_ratio(after, tree, sweep, normals)
-        explained = ratio_after * spacing <= _UNEXPLAINED * own
+        ratio_after, landing, spacing = spacing_ratio(after, tree, sweep, normals)
+        explained = ratio_after * spacing <= EXPLAINED_SPACINGS * own
         counts = np.maximum(np.bincount(groups, minlength=n_groups), 1)
         share = np.bincount(groups, weights=explained, minlength=n_groups) / counts
         moves = np.linalg.norm(after - self.moved[rows], axis=1)
@@ -446,7 +401,7 @@ class _SeedTests(NamedTuple):
         # partly on its old place, but its displaced faces lie off the old ones' planes.
         pairs = unique_rows(np.column_stack([groups[explained], landing[explained]]))
         if len(pairs):
-            new, _ = _unexplained(
+            new, _ = unexplained_mask(
                 sweep[pairs[:, 1]], self.resting, self.resting.data, self.rest_normals, self.scale
             )
             at_rest = np.bincount(pairs[:, 0], weights=~new, minlength=n_groups)
@@ -454,7 +409,7 @@ class _SeedTests(NamedTuple):
         else:
             at_rest = landed = np.zeros(n_groups)
         new_place = (landed > 0) & (at_rest < _MAX_RESTING * np.maximum(landed, 1))
-        margin = np.maximum(_MIN_DEPARTURE * group_spacing, _MIN_SCALES * self.scale)
+        margin = np.maximum(_MIN_DEPARTURE * group_spacing, OFF_PLANE_SCALES * self.scale)
         passed = (
             (share >= _MIN_EXPLAINED) & (departure > margin) & new_place & (counts >= self.min_size)
         )
@@ -492,14 +447,14 @@ def _members(a, free, unexplained, seeds, accepted, R, t, target, islands, min_s
     k = owner[islands[rows]]
     moved = np.einsum("nij,nj->ni", R[k], a[rows]) + t[k]
     sweep, tree, normals = target
-    ratio_new, _, _ = _spacing_ratio(moved, tree, sweep, normals)
+    ratio_new, _, _ = spacing_ratio(moved, tree, sweep, normals)
     # The core: the points the new motion explains and the ego motion does not. Points
     # both explain (a wall the object slides along, the object's faces parallel to
     # its motion) join only where most of their nearest neighbours have joined: the
     # object grows over its own surface, and a wall it touches along a line keeps to
     # the static world.
-    member = unexplained[rows] & (ratio_new <= _UNEXPLAINED)
-    either = ratio_new <= _UNEXPLAINED
+    member = unexplained[rows] & (ratio_new <= EXPLAINED_SPACINGS)
+    either = ratio_new <= EXPLAINED_SPACINGS
     if member.any() and len(rows) > _NEIGHBOURS:
         _, hood = cKDTree(a[rows]).query(a[rows], k=_NEIGHBOURS + 1)
         hood = hood[:, 1:]
