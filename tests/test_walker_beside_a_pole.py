@@ -38,7 +38,10 @@ def test_a_walker_beside_a_pole_is_found_and_the_pole_stays(heading):
     assert static_moving == []
 
 
-@pytest.mark.parametrize(("heading", "gap"), [(0, 1.4), (90, 1.4), (45, 1.0)])
+# At 0 degrees 1.3 m rather than 1.4 m: there the walker's seed passed the new-place test
+# by half a point (97 of its 195 landing points explained at rest, against a bound of
+# half), a threshold rather than a case; at 1.3 m it is 101 of 218.
+@pytest.mark.parametrize(("heading", "gap"), [(0, 1.3), (90, 1.4), (45, 1.0)])
 def test_an_island_motion_that_takes_the_pole_along_is_refused(heading, gap):
     # The island's ICP follows the walker; moved with it the pole lands nowhere, where
     # the ego motion explains it. Taken as one, the island was a moving cluster of the
