@@ -318,6 +318,22 @@ def departures(points, rotations, translations, ego):
     return own - (points @ ego[0].T + ego[1])
 
 
+def climb(offsets, grade):
+    """How far each offset rises or falls beyond ``grade`` (height over horizontal run).
+
+    Positive where ``offsets`` (e.g. :func:`departures`, z up) climb more steeply than
+    ``grade``; traffic moves along the ground.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._array.geometry import climb
+    >>> climb(np.array([[4.0, 0.0, 0.5], [0.4, 0.0, 0.5]]), 0.25)
+    array([-0.5,  0.4])
+    """
+    return np.abs(offsets[:, 2]) - grade * np.linalg.norm(offsets[:, :2], axis=1)
+
+
 def residuals(a, b, rotations, translations, labels):
     """Residual vectors ``b_i - R_{l_i} a_i - t_{l_i}``; zero rows where the label is negative."""
     b = np.asarray(b, dtype=float)

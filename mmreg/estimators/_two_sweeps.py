@@ -27,7 +27,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
 from mmreg._array.flow import rigid_flow
-from mmreg._array.geometry import departures
+from mmreg._array.geometry import climb, departures
 from mmreg._array.grouping import group_bounds, group_centroids
 from mmreg._array.motion import _group_median, moving_clusters, static_cluster
 from mmreg._array.neighbors import query_workers
@@ -1282,6 +1282,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             ),
             reach=self.max_displacement_,
             max_grade=None if rest_normals is None else _MAX_GRADE,
+            rest_normals=rest_normals,
         )
         if len(slow_rotations):
             islands = np.where(slow >= 0, n_islands + slow, islands)
@@ -1389,8 +1390,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         if rest_normals is not None:
             # Traffic moves along the ground: a climb steeper than 1 in 4 (beyond the
             # noise, or a spacing) is the rings of a sparse sensor slid onto each other.
-            climb = np.abs(offset[:, 2]) - _MAX_GRADE * np.linalg.norm(offset[:, :2], axis=1)
-            valid &= ~(climb > np.repeat(rise_noise, n_starts))
+            valid &= ~(climb(offset, _MAX_GRADE) > np.repeat(rise_noise, n_starts))
         moving, pick, explained = choose_island_motions(
             a[chosen],
             islands[chosen],

@@ -59,7 +59,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from mmreg._array.geometry import departures
+from mmreg._array.geometry import climb, departures
 from mmreg._array.grouping import group_centroids
 from mmreg._array.motion import _group_median
 from mmreg._array.unique_rows import unique_rows
@@ -163,6 +163,7 @@ def slow_movers(
     starts=None,
     reach=np.inf,
     max_grade=None,
+    rest_normals=None,
 ):
     """Small objects that move by a few sampling spacings, found point by point.
 
@@ -206,6 +207,9 @@ def slow_movers(
         Where the seeds start again, a motion that climbs steeper than this (height
         over the horizontal distance, beyond the noise or the seed's spacing) is
         refused: traffic moves along the ground. None: no test (sweeps not z-up).
+    rest_normals : SurfaceNormals or None, default=None
+        The normals of ``resting``'s points (10 neighbours) where the caller keeps them,
+        so that the two share what each computes; None: made here.
 
     Returns
     -------
@@ -272,7 +276,8 @@ def slow_movers(
     )
     R, t = result.rotations, result.translations
     own = _own_spacing(moved[chosen], resting)
-    rest_normals = SurfaceNormals(resting.data, resting, _NORMAL_POINTS)
+    if rest_normals is None:
+        rest_normals = SurfaceNormals(resting.data, resting, _NORMAL_POINTS)
     tests = _SeedTests(a, moved, target, resting, rest_normals, scale, min_size)
     passed, _ = tests(chosen, seeds[chosen], n_seeds, (R, t), own)
     cells = None  # the first sweep's islands of voxels of side ``cell``, when needed
@@ -359,9 +364,8 @@ def _restart(chosen, seeds, retry, offsets, own, ego, tests, icp, bounds):
     offset = departures(np.repeat(centre, n_starts, axis=0), *motions, ego)
     passed &= ~(np.linalg.norm(offset, axis=1) > reach)
     if max_grade is not None:
-        climb = np.abs(offset[:, 2]) - max_grade * np.linalg.norm(offset[:, :2], axis=1)
         noise = np.fmax(OFF_PLANE_SCALES * tests.scale, _group_median(own[again], groups, n_retry))
-        passed &= ~(climb > np.repeat(noise, n_starts))
+        passed &= ~(climb(offset, max_grade) > np.repeat(noise, n_starts))
     score = np.where(passed & valid, share, -np.inf).reshape(n_retry, n_starts)
     best = np.arange(n_retry) * n_starts + np.argmax(score, axis=1)
     found = np.isfinite(score.max(axis=1))
