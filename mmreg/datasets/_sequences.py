@@ -87,9 +87,9 @@ from pathlib import Path
 import numpy as np
 
 from mmreg.io import _lidar as _lidar_files
-from mmreg.io._arrays import _load_text_table
 from mmreg.io._checks import _check_readable
 from mmreg.io._correspondences import _read_point_file
+from mmreg.io._kitti_poses import _kitti_matrices
 
 __all__ = [
     "Argoverse2Sweeps",
@@ -210,18 +210,6 @@ class BagSequence(_Sequence):
 
 
 # --------------------------------------------------------------------------- KITTI
-def _kitti_matrices(path, n_values, what):
-    """(m, n_values) float rows of a KITTI text file (poses.txt, times.txt)."""
-    table = _load_text_table(_check_readable(path, what))
-    if table.ndim != 2 or table.shape[1] != n_values:
-        raise ValueError(
-            f"{path}: {what} must hold {n_values} number(s) a line; got shape {table.shape}."
-        )
-    if not np.all(np.isfinite(table)):
-        raise ValueError(f"{path}: {what} holds NaN or infinity.")
-    return table
-
-
 def _kitti_tr(path):
     """The 4 x 4 velodyne-to-camera transform ``Tr`` of a KITTI ``calib.txt``."""
     path = _check_readable(path, "KITTI calibration")

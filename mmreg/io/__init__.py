@@ -26,6 +26,17 @@ point clouds
     ``binary_compressed``; ``x``, ``y``, ``z`` and packed ``rgb``), read and written by
     mmreg itself (the files agree with Open3D's); ``.xyz`` (``x y z`` per line) as text;
     ``.npy`` / ``.csv`` / ``.txt`` ``(n, 3)`` arrays for reading.
+SemanticKITTI ``.label``
+    one little-endian ``uint32`` per point (class in the lower 16 bits, instance id in
+    the upper 16), or one ``uint8`` per point (nuScenes logs converted to the
+    SemanticKITTI layout), told apart by the scan's point count; LiDAR-MOS's moving
+    (251) and static (9) classes from a sequence's tracks
+    (:func:`semantickitti_mos_labels`), the true moving mask and the points to leave
+    out (:func:`moving_from_labels`).
+KITTI poses
+    one ``3 x 4`` matrix ``[R | t]`` a line, 12 numbers row-major; written in the
+    shortest form that reads back exactly, read with a check that every ``R`` is a
+    rotation.
 LiDAR sweeps (reading; see :mod:`mmreg.io._lidar`)
     KITTI velodyne ``.bin`` (float32 ``x y z reflectance``), nuScenes ``.pcd.bin``
     (float32 ``x y z intensity ring``), Argoverse 2 ``.feather`` (``x y z``, and
@@ -68,16 +79,23 @@ import importlib
 # Each public name and the module that holds it, imported on first use (PEP 562): the
 # command line imports mmreg.io's small helpers without paying for every reader.
 _LAZY = {
+    "SemanticKittiLabels": "mmreg.io._semantickitti",
     "atomic_write": "mmreg.io._atomic",
+    "moving_from_labels": "mmreg.io._semantickitti",
     "read_correspondences": "mmreg.io._correspondences",
+    "read_kitti_poses": "mmreg.io._kitti_poses",
     "read_labels": "mmreg.io._labels",
     "read_motions": "mmreg.io._motions",
     "read_point_cloud": "mmreg.io._point_clouds",
+    "read_semantickitti_labels": "mmreg.io._semantickitti",
     "read_times": "mmreg.io._labels",
+    "semantickitti_mos_labels": "mmreg.io._semantickitti",
     "write_correspondences": "mmreg.io._correspondences",
+    "write_kitti_poses": "mmreg.io._kitti_poses",
     "write_labels": "mmreg.io._labels",
     "write_motions": "mmreg.io._motions",
     "write_point_cloud": "mmreg.io._point_clouds",
+    "write_semantickitti_labels": "mmreg.io._semantickitti",
 }
 
 __all__ = sorted(_LAZY)
