@@ -23,6 +23,12 @@ community defines them:
   measure); :func:`make_end_point_error_scorer`,
   :func:`make_bucketed_epe_scorer` and :func:`scene_flow_scorers` score ``flow_``
   against the true flow as ``y``.
+
+Functions of a whole LiDAR log, lists of per-frame arrays (one value per point):
+
+* :func:`moving_iou`: LiDAR-MOS's moving-object IoU, counts summed over the frames;
+* :func:`tracking_scores`: per true object the share of its frames a track finds it in,
+  ID switches and fragmentations (CLEAR-MOT's), and false moving tracks per frame.
 """
 
 from sklearn.metrics import adjusted_rand_score
@@ -51,8 +57,10 @@ from mmreg.metrics._scorer import (
     make_translation_error_scorer,
     registration_scorers,
 )
+from mmreg.metrics._sequences import TrackingScores, moving_iou, tracking_scores
 
 __all__ = [
+    "TrackingScores",
     "adjusted_rand_score",
     "bucketed_epe",
     "chamfer_distance",
@@ -70,6 +78,7 @@ __all__ = [
     "make_rotation_error_scorer",
     "make_translation_error_scorer",
     "misclassification_error",
+    "moving_iou",
     "objects_found",
     "per_point_error",
     "registration_scorers",
@@ -77,5 +86,6 @@ __all__ = [
     "scene_flow_metrics",
     "scene_flow_scorers",
     "three_way_epe",
+    "tracking_scores",
     "translation_error",
 ]
