@@ -16,6 +16,7 @@ from mmreg.datasets._flying_things import PRIMITIVES, make_flying_things
 from mmreg.datasets._flying_things_data import load_flying_things
 from mmreg.datasets._kitti import load_kitti_scene_flow
 from mmreg.datasets._lidar import make_lidar_sweeps
+from mmreg.datasets._lidar_sequence import lidar_sequence_pair, make_lidar_sequence
 from mmreg.datasets._meshes import MESH_NAMES, load_mesh_points
 from mmreg.datasets._pfm import read_pfm, write_pfm
 from mmreg.datasets._sam import simulate_sam_masks
@@ -46,12 +47,14 @@ __all__ = [
     "SURFACE_KINDS",
     "add_wrong_correspondences",
     "corrupt_scene_flow",
+    "lidar_sequence_pair",
     "load_argoverse2",
     "load_correspondences",
     "load_flying_things",
     "load_kitti_scene_flow",
     "load_mesh_points",
     "make_flying_things",
+    "make_lidar_sequence",
     "make_lidar_sweeps",
     "make_scene",
     "make_street",
