@@ -103,19 +103,56 @@ def test_objects_flying_apart_test_no_pair():
 def test_spanning_union_asks_for_the_pairs_only_in_a_camera_view():
     rng = np.random.default_rng(0)
     box = rng.uniform(-1, 1, (100, 3))
+    asked = []
 
-    def refuse():
-        raise AssertionError("the pairs were tested")
+    def members():
+        asked.append(True)
+        matrix = np.eye(6, dtype=bool)
+        matrix[0, 1] = matrix[1, 0] = True  # the backdrop's two pieces move alike
+        return matrix
 
-    around = np.vstack([box + [-5.0, 0.0, 0.0], box + [5.0, 0.0, 0.0], box + [0.0, 5.0, 0.0]])
-    labels = np.repeat(np.arange(3), 100)
-    assert spanning_union(group_moments(around, around, labels, 3), refuse) == -1
-    # In a camera's view the same call reads them, as an array would be read.
+    around = np.vstack([box + [x, y, 0.0] for x, y in ((-5, 0), (5, 0), (0, 5), (0, -5))])
+    around = np.vstack([around, box + [9.0, 9.0, 0.0], box + [-9.0, 9.0, 0.0]])
+    labels = np.repeat(np.arange(6), 100)
+    assert spanning_union(group_moments(around, around, labels, 6), members) == -1
+    assert not asked
+    # In a camera's view it reads them, as it reads an array.
     left = rng.uniform([-12, -3, 28], [-4, 3, 30], (100, 3))
     right = rng.uniform([4, -3, 28], [12, 3, 30], (100, 3))
     boxes = [box + [x, 0.0, 15.0] for x in (-8, -3, 3, 8)]
     seen = np.vstack([left, right, *boxes])
-    moments = group_moments(seen, seen, np.repeat(np.arange(6), 100), 6)
-    members = np.eye(6, dtype=bool)
-    members[0, 1] = members[1, 0] = True
-    assert spanning_union(moments, lambda: members) == spanning_union(moments, members) == 0
+    moments = group_moments(seen, seen, labels, 6)
+    assert spanning_union(moments, members) == spanning_union(moments, members()) == 0
+    assert len(asked) == 2
+
+
+def _objects(centres, rng):
+    """Twenty boxes of 50 rows at ``centres``, each with a motion of its own, fitted."""
+    a, b = [], []
+    for centre in centres:
+        points = centre + rng.uniform(-1, 1, (50, 3))
+        turn = Rotation.from_rotvec(rng.normal(scale=0.05, size=3)).as_matrix()
+        a.append(points)
+        b.append((points - centre) @ turn.T + centre + rng.normal(size=3))
+    a, b = np.vstack(a), np.vstack(b)
+    labels = np.repeat(np.arange(len(centres)), 50)
+    return _steps.fit_clusters(a, b, labels, len(centres), 0.01)
+
+
+def test_the_static_world_tests_pairs_only_in_a_camera_view(monkeypatch):
+    # Twenty objects, none a majority or spanning the scene: the static world looks for a
+    # background in pieces, which only a camera's view can name.
+    rng = np.random.default_rng(0)
+    calls = []
+    every_pair = _steps.gathered_by_each
+    monkeypatch.setattr(
+        _steps, "gathered_by_each", lambda *args: calls.append(1) or every_pair(*args)
+    )
+    angles = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    around = np.column_stack([30 * np.cos(angles), 30 * np.sin(angles), np.zeros(20)])
+    static = _steps.merge_static_world(_objects(around, rng), D, 0.01)[0]
+    assert static == -1
+    assert not calls
+    ahead = np.column_stack([np.linspace(-30, 30, 20), np.zeros(20), np.full(20, 40.0)])
+    _steps.merge_static_world(_objects(ahead, rng), D, 0.01)
+    assert len(calls) == 1
