@@ -182,7 +182,10 @@ def spanning_union(moments, members):
     ----------
     moments : Moments
         The clusters' statistics (empty ones have a zero count), every row weighted alike.
-    members : ndarray of shape (K, K), dtype bool
+    members : ndarray of shape (K, K), dtype bool, or callable
+        Or a function of no arguments that returns it, called only when the clusters are
+        seen from one side (a camera's view, below): testing every pair of clusters
+        costs far more than everything else here, and a LiDAR's sweep never needs it.
 
     Returns
     -------
@@ -210,10 +213,8 @@ def spanning_union(moments, members):
     >>> spanning_union(moments, members)
     -1
     """
-    members = np.asarray(members, dtype=bool)
     count, first, second = _about_origin(moments)
     present = count > 0
-    members = members & present[None, :] & present[:, None]
     if np.count_nonzero(present) < 2:
         return -1
     total = count[present].sum()
@@ -222,6 +223,8 @@ def spanning_union(moments, members):
     squared_range = second / np.where(present, count, 1.0)
     if not _in_view(moments.mean_a[present], squared_range[present], centre):
         return -1
+    members = np.asarray(members() if callable(members) else members, dtype=bool)
+    members = members & present[None, :] & present[:, None]
     union = members.astype(float)
     union_count = union @ count
     safe = np.where(union_count > 0, union_count, 1.0)

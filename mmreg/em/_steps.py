@@ -907,6 +907,91 @@ def _with(models, other):
     )
 
 
+# Pairs of clusters whose bounds gathered_by_each reads at once (memory: 25 floats each).
+_PAIRS_PER_BLOCK = 1 << 18
+
+
+def _pairs_that_may_gather(models, d, min_motion, present):
+    """The pairs ``(i, j)`` of ``present`` clusters, ``i != j``, that lower bounds on
+    :func:`_merge_ratio` and :func:`motion_beyond_scatter` cannot rule out.
+
+    Both tests read a cluster's squared error under another motion, which is at least its
+    least squared error plus its count times the distance by which that motion misplaces
+    its centroid (Pythagoras, from the sufficient statistics). So a joint motion
+    leaves an excess of at least ``h (|mb_i - mb_j| - |ma_i - ma_j|)^2`` (``h`` the two
+    weights ``count / sigma^2`` in series: no rigid motion changes how far apart the
+    centroids are), and ``i``'s motion carries ``j``'s points at least as far from where
+    ``j``'s does as it carries ``j``'s centroid, less what each cluster's own motion
+    errs above its least squared error (zero for fitted motions). Pairs with a bound
+    twice beyond its test's threshold (and a margin for rounding) cannot pass it; the
+    rest are tested exactly.
+    """
+    moments = models.moments.take(present)
+    sigma2 = models.sigmas[present] ** 2
+    count, size = moments.count, moments.size
+    least = moments.squared_error(*moments.fit())
+    slack = np.maximum(models.squared_error[present] - least, 0.0)
+    # The size of the terms that the tests add and subtract, for a margin of rounding.
+    magnitude = moments.scatter_a + moments.scatter_b
+    magnitude = magnitude + count * (
+        np.einsum("ij,ij->i", moments.mean_a, moments.mean_a)
+        + np.einsum("ij,ij->i", moments.mean_b, moments.mean_b)
+    )
+    weight = count / sigma2
+    merge_slack = (slack + 1e-9 * magnitude) / sigma2
+    scatter = np.sqrt(np.maximum(models.squared_error[present], 0.0) / np.maximum(count, 1e-300))
+    reach = count * 4.0 * np.maximum(min_motion + scatter, 0.0) ** 2 + slack + 1e-9 * magnitude
+    rotations, translations = models.rotations[present], models.translations[present]
+    n = len(present)
+    step = max(1, _PAIRS_PER_BLOCK // max(n, 1))
+    found = []
+    for start in range(0, n, step):
+        i = np.arange(start, min(start + step, n))
+        apart_a = np.linalg.norm(moments.mean_a[i, None] - moments.mean_a[None], axis=2)
+        apart_b = np.linalg.norm(moments.mean_b[i, None] - moments.mean_b[None], axis=2)
+        series = weight[i, None] * weight[None] / (weight[i, None] + weight[None])
+        price = motion_parameters(d) * np.log(np.maximum(size[i, None] + size[None], 2))
+        may_merge = (
+            series * (apart_b - apart_a) ** 2 - merge_slack[i, None] - merge_slack[None]
+            <= 2.0 * price
+        )
+        # Where i's motion puts j's a-centroid, against j's b-centroid.
+        carried = np.einsum("iab,jb->ija", rotations[i], moments.mean_a) + translations[i, None]
+        off = carried - moments.mean_b[None]
+        may_be_slow = count[None] * np.einsum("ija,ija->ij", off, off) <= reach[None]
+        may = may_merge | may_be_slow
+        may[np.arange(len(i)), i] = False
+        row, column = np.nonzero(may)
+        found.append(np.column_stack([present[i[row]], present[column]]))
+    return np.vstack(found) if found else np.empty((0, 2), dtype=np.intp)
+
+
+def gathered_by_each(models, d, min_motion):
+    """What the static world would gather with it, were each cluster the static world.
+
+    Row ``j`` marks ``j`` and every cluster whose motion agrees with ``j``'s
+    (:func:`_merge_ratio` below 1) or moves less than ``min_motion`` relative to it beyond
+    its own scatter (:func:`motion_beyond_scatter`): what :func:`merge_static_world`
+    gathers. Only the pairs that bounds on both tests leave open are tested
+    (:func:`_pairs_that_may_gather`), so that a thousand far-apart objects do not cost a
+    million rigid fits; the result is that of testing every pair.
+
+    Returns
+    -------
+    members : ndarray of shape (K, K), dtype bool
+    """
+    k = len(models.sigmas)
+    members = np.eye(k, dtype=bool)
+    present = np.flatnonzero(models.moments.size > 0)
+    pairs = _pairs_that_may_gather(models, d, min_motion, present)
+    if len(pairs):
+        i, j = pairs[:, 0], pairs[:, 1]
+        with_it = _merge_ratio(models, pairs, d) < 1.0
+        with_it |= motion_beyond_scatter(models, i, j) < min_motion
+        members[i[with_it], j[with_it]] = True
+    return members
+
+
 def merge_static_world(
     models, d, sigma_floor, *, share=0.5, min_motion=0.0, ego_motion=None, geometry=None
 ):
@@ -966,17 +1051,6 @@ def merge_static_world(
             slow = ~agree & (motion_beyond_scatter(models, static, others) < min_motion)
         return others[agree], others[slow]
 
-    def gathered_by_each():
-        # gathered(j) of every cluster j at once: row j marks j and what it would gather.
-        present = np.flatnonzero(sizes > 0)
-        i, j = np.repeat(present, len(present)), np.tile(present, len(present))
-        i, j = i[i != j], j[i != j]
-        with_it = _merge_ratio(models, np.column_stack([i, j]), d) < 1.0
-        with_it |= motion_beyond_scatter(models, i, j) < min_motion
-        members = np.eye(k, dtype=bool)
-        members[i[with_it], j[with_it]] = True
-        return members
-
     if ego_motion is not None:
         present = np.flatnonzero(sizes > 0)
         gap = _motion_from(models.take(present), ego_motion)
@@ -1002,7 +1076,8 @@ def merge_static_world(
             if spans < 0:
                 # A background in pieces, none spanning the scene alone.
                 spans = spanning_union(
-                    models.moments if geometry is None else geometry, gathered_by_each()
+                    models.moments if geometry is None else geometry,
+                    lambda: gathered_by_each(models, d, min_motion),
                 )
             if spans < 0:
                 return none
