@@ -309,16 +309,28 @@ class KittiSequence(_Sequence):
         self.names = files
         self._files = [velodyne / name for name in files]
 
-    @functools.cached_property
+    # Plain properties (not functools.cached_property, whose frame is not mmreg's): the
+    # poses' warning names the user's line.
+    @property
     def timestamps(self):
+        if "_timestamps" not in vars(self):
+            self._timestamps = self._read_timestamps()
+        return self._timestamps
+
+    @property
+    def poses(self):
+        if "_poses" not in vars(self):
+            self._poses = self._read_poses()
+        return self._poses
+
+    def _read_timestamps(self):
         path = self.path / "times.txt"
         if not path.is_file():
             return None
         times = _kitti_matrices(path, 1, "frame times")[:, 0]
         return self._matching(times, len(self), path, "times")
 
-    @functools.cached_property
-    def poses(self):
+    def _read_poses(self):
         n = len(self)
         poses_path = self.path / "poses.txt"
         beside = poses_path.is_file()
