@@ -67,11 +67,29 @@ def test_a_folder_of_equal_size_frames_is_registered_as_sweeps(tmp_path, schedul
 
 
 def test_stacked_scans_are_refused_and_correspondences_are_not():
-    from mmreg.sweeps._stacked_rows import MAX_STILL_ONLY, stacked_sweeps
+    from mmreg.sweeps._stacked_rows import (
+        MAX_COHERENCE,
+        MAX_STILL_ONLY,
+        STILL_SPACINGS,
+        stacked_sweeps,
+    )
 
     scene = street()
     found = stacked_sweeps(*same_size(scene))
     assert found["stacked"] and found["still_only"] > 2 * MAX_STILL_ONLY
+    # Each scan cut by evenly spaced rows of its own: the rows drift by a few rays and
+    # follow nothing, but alike from row to row.
+    n = 6000
+    a, b = (p[np.linspace(0, len(p) - 1, n).astype(int)] for p in (scene.a, scene.sweep))
+    found = stacked_sweeps(a, b)
+    assert (
+        found["stacked"]
+        and found["misfit_spacings"] > 2 * STILL_SPACINGS
+        and found["coherence"] < MAX_COHERENCE / 4
+    )
+    noisy = scene.a + scene.flow + np.random.default_rng(3).normal(0, 0.3, scene.a.shape)
+    found = stacked_sweeps(scene.a, noisy)  # noise: misplaced, but not alike
+    assert not found["stacked"] and found["coherence"] > 2 * MAX_COHERENCE
     for b in (scene.a + scene.flow, scene.a + scene.flow + 0.05 * np.ones(3)):
         found = stacked_sweeps(scene.a, b)  # where each point went (a bias: still so)
         assert not found["stacked"] and found["still_only"] < MAX_STILL_ONLY / 2
