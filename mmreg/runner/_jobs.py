@@ -509,8 +509,13 @@ class SequenceSweepPairJob:
     files: tuple = ()
 
     def inputs(self):
-        """The files the job reads (a bag: the bag)."""
-        return self.files or (self.path,)
+        """The files the job reads (a bag: its file, or every file of a ROS 2 bag folder)."""
+        if self.files:
+            return self.files
+        path = Path(self.path)
+        if path.is_dir():
+            return tuple(sorted(str(p) for p in path.iterdir() if p.is_file()))
+        return (self.path,)
 
     def load(self):
         from mmreg.datasets import open_sequence
