@@ -37,7 +37,8 @@ def test_view_and_evaluate_a_run_of_frames(tmp_path, scheduler, capsys):
     frames, truth = _write_frames(tmp_path / "frames")
     np.save(tmp_path / "truth.npy", truth)
     out = tmp_path / "run"
-    assert main(["run", str(frames), "--out", str(out), "--scheduler", scheduler, "-q"]) == 0
+    command = ["run", str(frames), "--pairs", "aligned", "--out", str(out), "-q"]
+    assert main([*command, "--scheduler", scheduler]) == 0
     # Frames of index-aligned clouds are correspondences: --tau's default is 1.5.
     assert json.loads((out / "run.json").read_text())["configuration"]["tau"] == 1.5
     capsys.readouterr()

@@ -47,8 +47,9 @@ def test_the_kitti_sequence_reader_shares_the_parser(tmp_path):
     write_kitti_poses(tmp_path / "poses.txt", _poses(2, 3))
     np.testing.assert_allclose(open_sequence(tmp_path).poses, _poses(2, 3), atol=1e-12)
     (tmp_path / "poses.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 nan\n" * 2)
+    sequence = open_sequence(tmp_path)  # poses are read when first used
     with pytest.raises(ValueError, match=r"poses\.txt.*NaN or infinity.*line 1"):
-        open_sequence(tmp_path)
+        sequence.poses  # noqa: B018
 
 
 @pytest.mark.parametrize(

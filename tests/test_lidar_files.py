@@ -329,8 +329,8 @@ def test_register_takes_an_n_by_3_npy_with_flow(tmp_path):
         ({"a.npy": (5, 4), "f.npy": (5, 3)}, ["--flow", "f.npy"], "has 4 columns"),
         ({"a.npy": (5, 3), "f.npy": (4, 3)}, ["--flow", "f.npy"], "holds 4 points but"),
         ({"a.npy": (5, 3)}, [], "holds only the a-points; .* --sweep S"),
-        ({"a.bin": b"\0" * 64}, ["--frame", "2"], "--frame apply only to a ROS bag"),
-        ({"a.bin": b"\0" * 64}, ["--topic", "/x"], "--topic apply only to a ROS bag"),
+        ({"a.bin": b"\0" * 64}, ["--frame", "2"], "--frame applies only to a ROS bag"),
+        ({"a.bin": b"\0" * 64}, ["--topic", "/x"], "--topic applies only to a ROS bag"),
         (
             {"a.bin": b"\0" * 64, "s.bin": b"\0" * 64},
             ["--sweep", "s.bin", "--interval", "0.1"],

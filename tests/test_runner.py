@@ -40,6 +40,11 @@ def _write_frames(folder, n_frames=4):
     return folder
 
 
+def _aligned(folder):
+    """The jobs of a folder of index-aligned frames (frames are sweeps unless told)."""
+    return dataset_jobs(folder, pairs="aligned")
+
+
 def _plain_loop(jobs, estimator):
     """What run_dataset must give: load and fit each job in turn."""
     from sklearn.base import clone
@@ -63,9 +68,9 @@ def _mtimes(out):
 
 def test_frames_match_a_plain_loop(tmp_path, scheduler):
     data = _write_frames(tmp_path / "frames")
-    jobs = dataset_jobs(data)
+    jobs = dataset_jobs(data, pairs="aligned")
     assert [job.name for job in jobs] == ["frame0__frame1", "frame1__frame2", "frame2__frame3"]
-    summary = run_dataset(data, _estimator(), tmp_path / "out", scheduler=scheduler, progress=False)
+    summary = run_dataset(jobs, _estimator(), tmp_path / "out", scheduler=scheduler, progress=False)
     expected = _plain_loop(jobs, _estimator())
     assert summary["job"].tolist() == [job.name for job in jobs]
     assert (summary["status"] == "done").all() and not summary["resumed"].any()
@@ -87,7 +92,7 @@ def test_failed_job_is_retried_and_only_missing_jobs_run(tmp_path, scheduler):
     bad[5, 0] = np.nan
     np.save(data / "frame3.npy", bad)  # the last job cannot load
     out = tmp_path / "out"
-    first = run_dataset(data, _estimator(), out, scheduler=scheduler, progress=False)
+    first = run_dataset(_aligned(data), _estimator(), out, scheduler=scheduler, progress=False)
     assert first["status"].tolist() == ["done", "done", "error"]
     assert "NaN" in first["error"].iloc[2] and first["error"].iloc[0] == ""
     assert sorted(p.name for p in (out / "jobs").iterdir()) == [
@@ -96,12 +101,12 @@ def test_failed_job_is_retried_and_only_missing_jobs_run(tmp_path, scheduler):
     ]
     before = _mtimes(out)
     np.save(data / "frame3.npy", good)
-    second = run_dataset(data, _estimator(), out, scheduler=scheduler, progress=False)
+    second = run_dataset(_aligned(data), _estimator(), out, scheduler=scheduler, progress=False)
     assert (second["status"] == "done").all()
     assert second["resumed"].tolist() == [True, True, False]
     after = _mtimes(out)
     assert {k: after[k] for k in before} == before  # the done jobs were not rewritten
-    expected = _plain_loop(dataset_jobs(data)[2:], _estimator())["frame2__frame3"]
+    expected = _plain_loop(_aligned(data)[2:], _estimator())["frame2__frame3"]
     arrays, _ = read_job_result(out / "jobs" / "frame2__frame3.npz")
     np.testing.assert_array_equal(arrays["labels"], expected["labels"])
 
@@ -109,7 +114,7 @@ def test_failed_job_is_retried_and_only_missing_jobs_run(tmp_path, scheduler):
 def test_half_written_result_is_not_taken_as_done(tmp_path, scheduler):
     data = _write_frames(tmp_path / "frames")
     out = tmp_path / "out"
-    run_dataset(data, _estimator(), out, scheduler=scheduler, progress=False)
+    run_dataset(_aligned(data), _estimator(), out, scheduler=scheduler, progress=False)
     path = out / "jobs" / "frame1__frame2.npz"
     whole = path.read_bytes()
     arrays, _ = read_job_result(path)
@@ -117,7 +122,7 @@ def test_half_written_result_is_not_taken_as_done(tmp_path, scheduler):
     assert read_job_result(path) is None
     # A temporary file left by an interrupted write is not a result either.
     (out / "jobs" / ".frame2__frame3.npz.x1y2.tmp").write_bytes(whole[:100])
-    again = run_dataset(data, _estimator(), out, scheduler=scheduler, progress=False)
+    again = run_dataset(_aligned(data), _estimator(), out, scheduler=scheduler, progress=False)
     assert again["resumed"].tolist() == [True, False, True]
     redone, _ = read_job_result(path)
     for key in ARRAYS:  # the same job gives the same result
@@ -127,11 +132,11 @@ def test_half_written_result_is_not_taken_as_done(tmp_path, scheduler):
 def test_other_estimator_runs_every_job_again(tmp_path, scheduler):
     data = _write_frames(tmp_path / "frames", n_frames=3)
     out = tmp_path / "out"
-    run_dataset(data, _estimator(), out, scheduler=scheduler, progress=False)
+    run_dataset(_aligned(data), _estimator(), out, scheduler=scheduler, progress=False)
     other = MultiModelRegistration(tau=1.0, variant="paper", random_state=0)
-    again = run_dataset(data, other, out, scheduler=scheduler, progress=False)
+    again = run_dataset(_aligned(data), other, out, scheduler=scheduler, progress=False)
     assert not again["resumed"].any()
-    expected = _plain_loop(dataset_jobs(data), other)
+    expected = _plain_loop(_aligned(data), other)
     arrays, _ = read_job_result(out / "jobs" / "frame0__frame1.npz")
     np.testing.assert_array_equal(arrays["labels"], expected["frame0__frame1"]["labels"])
 
@@ -186,13 +191,13 @@ def test_argoverse2_log_scored_against_the_truth(tmp_path, scheduler):
 def test_command_line_resumes_and_guards_out(tmp_path, scheduler, capsys):
     data = _write_frames(tmp_path / "frames", n_frames=3)
     out = tmp_path / "out"
-    command = ["run", str(data), "--out", str(out), "--scheduler", scheduler]
-    command += ["--method", "robust", "--tau", "1", "--quiet"]
+    command = ["run", str(data), "--out", str(out), "--scheduler", scheduler, "--pairs"]
+    command += ["aligned", "--method", "robust", "--tau", "1", "--quiet"]
     assert main(command) == 0
     assert len(pd.read_csv(out / "summary.csv")) == 2
     assert sorted(os.listdir(out)) == ["jobs", "run.json", "summary.csv", "summary.parquet"]
     arrays, _ = read_job_result(out / "jobs" / "frame0__frame1.npz")
-    expected = _plain_loop(dataset_jobs(data)[:1], _estimator())["frame0__frame1"]
+    expected = _plain_loop(_aligned(data)[:1], _estimator())["frame0__frame1"]
     np.testing.assert_array_equal(arrays["labels"], expected["labels"])
     before = _mtimes(out)
     assert main(command) == 0 and _mtimes(out) == before
@@ -272,14 +277,15 @@ def test_raw_sweeps_of_different_sizes_one_job_per_pair(tmp_path, scheduler):
     assert again["resumed"].all()
 
 
-def test_frames_of_different_sizes_point_to_the_sweeps_option(tmp_path, scheduler, capsys):
+def test_aligned_frames_of_different_sizes_point_to_the_sweeps(tmp_path, scheduler, capsys):
     data, _ = _write_sweeps(tmp_path / "frames")
-    summary = run_dataset(data, _estimator(), tmp_path / "out", scheduler=scheduler, progress=False)
+    jobs = dataset_jobs(data, pairs="aligned")
+    summary = run_dataset(jobs, _estimator(), tmp_path / "out", scheduler=scheduler, progress=False)
     assert (summary["status"] == "error").all()
-    assert all("pairs='sweeps'" in error for error in summary["error"])
+    assert all("pairs at 'auto'" in error for error in summary["error"])
     command = ["run", str(data), "--out", str(tmp_path / "cli"), "--scheduler", scheduler, "-q"]
-    assert main(command) == 1
-    assert "--pairs sweeps" in capsys.readouterr().err
+    assert main([*command, "--pairs", "aligned"]) == 1
+    assert "drop --pairs aligned" in capsys.readouterr().err
     # A plain estimator cannot take the second sweep: said before any job runs.
     with pytest.raises(TypeError, match="SweepRegistration"):
         run_dataset(dataset_jobs(data, pairs="sweeps"), _estimator(), tmp_path / "other")

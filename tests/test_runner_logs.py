@@ -122,11 +122,17 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
     path.unlink()
     assert main(["run", str(log), "--scheduler", scheduler, "-q"]) == 0
     assert pd.read_csv(out / "summary.csv")["resumed"].all() and path.read_bytes() == whole
-    # Without a map the ground is unknown: dropping it is each job's error.
-    capsys.readouterr()
+    # Without a map, --ground drop is the estimator's, as in 'mmreg register'.
     command = ["run", str(log), "--ground", "drop", "--scheduler", scheduler, "-q"]
-    assert main([*command, "--out", str(tmp_path / "drop")]) == 1
-    assert "--ground drop needs it" in capsys.readouterr().err
+    assert main([*command, "--out", str(tmp_path / "drop")]) == 0
+    dropped = pd.read_csv(tmp_path / "drop" / "summary.csv")
+    for k, job in enumerate(jobs):
+        job_data = job.load()
+        model = _cli_estimator().set_params(ground="drop")
+        model.fit(job_data["X"], sweep=job_data["sweep"])
+        arrays, row = read_job_result(tmp_path / "drop" / "jobs" / f"{job.name}.npz")
+        np.testing.assert_array_equal(arrays["labels"], model.labels_)
+        assert dropped.loc[k, "ground"] == ("kept" if model.ground_mask_ is None else "dropped")
 
 
 def test_dropped_ground_rows_move_with_the_static_world_in_the_challenge_file(tmp_path, scheduler):
@@ -349,6 +355,7 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
         np.testing.assert_array_equal(one["X"], two["X"])
         np.testing.assert_array_equal(one["sweep"], two["sweep"])
     # A torn scan fails its jobs; KITTI has no ground map to drop by.
+    whole = (sequence / "velodyne" / "000002.bin").read_bytes()
     (sequence / "velodyne" / "000002.bin").write_bytes(b"\0" * 20)
     assert (
         main(
@@ -360,9 +367,10 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
     torn = pd.read_csv(tmp_path / "torn" / "summary.csv")
     assert torn["status"].tolist() == ["done", "error"]
     assert "000002.bin: 20 bytes is not a whole number of KITTI" in torn.loc[1, "error"]
+    # KITTI has no ground map: --ground drop is the estimator's (Patchwork++).
+    (sequence / "velodyne" / "000002.bin").write_bytes(whole)
     command = ["run", str(sequence), "--ground", "drop", "--scheduler", scheduler, "-q"]
-    assert main([*command, "--out", str(tmp_path / "drop")]) == 1
-    assert "--ground drop needs it" in capsys.readouterr().err
+    assert main([*command, "--out", str(tmp_path / "drop")]) == 0
 
 
 def test_ros2_bag_with_a_topic(tmp_path, scheduler, capsys):

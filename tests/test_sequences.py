@@ -222,12 +222,16 @@ def test_kitti_files_that_do_not_match_are_one_error(tmp_path):
     frames, _ = scene_frames(2)
     folder = _kitti_folder(tmp_path, frames, _velodyne_poses(2))
     (folder / "poses.txt").write_text((folder / "poses.txt").read_text().splitlines()[0] + "\n")
+    seq = open_sequence(folder)  # read when used: the points do not need them
+    np.testing.assert_array_equal(seq[1].points, frames[1])
     with pytest.raises(ValueError, match=r"poses.txt: 1 poses for the 2 scans"):
-        open_sequence(folder)
+        _ = seq.poses
+    with pytest.raises(ValueError, match=r"poses.txt: 1 poses for the 2 scans"):
+        _ = seq[1].pose
     (folder / "poses.txt").unlink()
     (folder / "times.txt").write_text("0.0\n0.1\n0.2\n")
     with pytest.raises(ValueError, match=r"times.txt: 3 times for the 2 scans"):
-        open_sequence(folder)
+        _ = open_sequence(folder).timestamps
     (folder / "times.txt").unlink()
     (folder / "calib.txt").write_text("P0: 1 2 3\n")
     assert open_sequence(folder).poses is None  # no poses: calib.txt is not needed

@@ -9,15 +9,50 @@ sweeps from their timestamps (an AV2 file name, a bag message's stamp) unless --
 gives it.
 """
 
+import contextlib
+import re
 from pathlib import Path
 
-from mmreg._cli._common import CLIError, reading
+from mmreg._cli._common import CLIError, one_line, reading
 
 CLOUD_EXTENSIONS = (".ply", ".pcd", ".xyz")
 ARRAY_EXTENSIONS = (".npy", ".csv", ".txt")
 # Capture times beyond this many --interval from zero are not seconds after the sweep's
 # reference time (nanoseconds, or absolute timestamps): a sweep lasts about one interval.
 MAX_TIMES_PER_INTERVAL = 10.0
+
+
+# The library's messages name a parameter and its option together: "pattern='*.bin'
+# (--pattern '*.bin')", "--topic (topic=)", "topic= (--topic)". The command line names
+# the option alone.
+_BOTH = re.compile(r"\b\w+=(?:'[^']*'|\S*?) \((?:on the command line: )?(--[\w-]+[^)]*)\)")
+_OPTION_THEN_NAME = re.compile(r"(--[\w-]+) \(\w+=\)")
+
+
+def cli_words(message):
+    """``message`` with the library's parameter spellings left out where it names the
+    command-line option too.
+
+    Examples
+    --------
+    >>> from mmreg._cli._lidar_input import cli_words
+    >>> cli_words("choose one with pattern='*.bin' (--pattern '*.bin').")
+    "choose one with --pattern '*.bin'."
+    >>> cli_words("choose one with --topic (topic=); topic= (--topic) applies to a bag")
+    'choose one with --topic; --topic applies to a bag'
+    """
+    return _OPTION_THEN_NAME.sub(r"\1", _BOTH.sub(r"\1", str(message)))
+
+
+@contextlib.contextmanager
+def option_words():
+    """Errors raised inside speak of command-line options (:func:`cli_words`)."""
+    try:
+        yield
+    except CLIError as error:
+        raise CLIError(cli_words(one_line(error))) from None
+    except (ValueError, FileNotFoundError) as error:
+        raise type(error)(cli_words(one_line(error))) from error
 
 
 def is_sequence(path):
@@ -91,16 +126,21 @@ def check_points_for(path, option):
 
 
 def check_sequence_options(args):
-    """--topic and --frame apply to a sequence INPUT only; a CLIError otherwise."""
+    """--topic, --frame and --pattern apply to a sequence INPUT only; a CLIError otherwise."""
     sequence = is_sequence(args.input)
+    options = (("--topic", args.topic), ("--frame", args.frame))
+    options += (("--pattern", getattr(args, "pattern", None)),)
+    given = [flag for flag, value in options if value is not None]
     if not sequence:
-        given = [f for f, v in (("--topic", args.topic), ("--frame", args.frame)) if v is not None]
         if given:
+            verb = "applies" if len(given) == 1 else "apply"
             raise CLIError(
-                f"{args.input}: {' and '.join(given)} apply only to a ROS bag or a sequence "
+                f"{args.input}: {' and '.join(given)} {verb} only to a ROS bag or a sequence "
                 "folder as INPUT"
             )
         return
+    if getattr(args, "pattern", None) is not None and not Path(args.input).is_dir():
+        raise CLIError(f"{args.input}: --pattern chooses the frame files of a folder INPUT")
     if getattr(args, "sweep", None) is not None:
         raise CLIError(
             f"{args.input}: a sequence INPUT registers frame K (--frame) against frame K+1; "
@@ -118,9 +158,10 @@ def read_frames(args):
     from mmreg.datasets import open_sequence
 
     k = 0 if args.frame is None else args.frame
-    with reading(args.input):
+    with reading(args.input), option_words():
         try:
-            sequence = open_sequence(args.input, topic=args.topic)
+            pattern = getattr(args, "pattern", None)
+            sequence = open_sequence(args.input, topic=args.topic, pattern=pattern)
         except ImportError as error:  # a bag without the optional rosbags package
             raise CLIError(f"{args.input}: {error}") from None
         n = len(sequence)

@@ -238,6 +238,7 @@ def _load_job(job, result):
             capture_times=configuration.get("capture_times", True),
             flow=configuration.get("flow"),
             topic=configuration.get("topic"),
+            pattern=configuration.get("pattern"),
         )
     found = [j for j in jobs if j.name == result.name]
     if not found:

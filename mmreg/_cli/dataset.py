@@ -25,38 +25,51 @@ DATASET is one of
     annotations), or a folder of logs (a split): one job per consecutive sweep pair (N
     sweeps, N-1 jobs), scored against the truth where the log has annotations. A log
     of a split that cannot be read is a failed row; the others go on;
-  - a KITTI odometry or SemanticKITTI sequence (a folder with velodyne/*.bin), or a ROS
-    bag (.bag, a ROS 2 bag folder, .db3, .mcap; --topic picks its PointCloud2 topic when
-    it has several): one job per consecutive frame pair (rows that are NaN or all zero,
-    no return, are left out);
-  - a folder of frames (*.ply, *.pcd, *.xyz or (n, 3) *.npy, in name order): one job per
-    consecutive pair, frame k+1 giving the b-point of every row of frame k (index-aligned
-    clouds), or with --pairs sweeps two raw sweeps;
+  - a KITTI odometry or SemanticKITTI sequence (a folder with velodyne/*.bin; its
+    poses, where it has them, start each pair's ego-motion ICP: poses.txt with calib.txt,
+    or a poses.txt alone, read as the LiDAR's own as nuScenes-to-KITTI conversions write
+    them), a folder of sweep files (.bin, .pcd.bin), or a ROS bag (.bag, a ROS 2 bag
+    folder, .db3, .mcap; --topic picks its PointCloud2 topic when it has several): one
+    job per consecutive frame pair (rows that are NaN or all zero, no return, are left
+    out);
+  - a folder of KITTI sequences (sequences/ holding 00, 01, ..., or the root holding
+    sequences/): the jobs of every sequence, named <sequence>_<frame>; a sequence that
+    cannot be read is a failed row, the others go on;
+  - a folder of frames (*.ply, *.pcd, *.xyz or (n, 3) *.npy, in name order; --pattern
+    GLOB picks one kind when it holds several): one job per consecutive pair, two raw
+    sweeps, or with --pairs aligned frame k+1 giving the b-point of every row of frame k
+    (index-aligned clouds);
   - a folder of correspondence files ((n, 6) *.npy, *.npz, *.csv, *.txt): one job per
     file; an .npz may hold the truth too ('labels', 'flow'), then scored.
 
 --pairs says what a job fits:
-  - auto (default): sweeps for LiDAR logs, aligned for frames;
+  - auto (default): sweeps for LiDAR logs and frames;
   - sweeps: two raw sweeps of any sizes and orders, registered from the points alone:
     sweep k to sweep k+1 by SweepRegistration (ego motion and object motions by ICP,
     clusters by the --method variant);
   - truth: an Argoverse 2 log's ground-truth flow as the correspondences. The fit sees
     the answer: its scores measure the clustering, not the flow; the summary's pairs
     column says 'truth' and the printed line says how many jobs were fed the truth;
-  - aligned: index-aligned frames (row i of frame k+1 matches row i of frame k); on an
-    Argoverse 2 log the same as truth.
+  - aligned: index-aligned frames (row i of frame k+1 matches row i of frame k, as a
+    simulation's particles at two times); two LiDAR scans of the same size stacked row
+    by row (the same ray, not the same point) are refused, as they are no
+    correspondences. On an Argoverse 2 log the same as truth.
 
 --flow DIR refines a network's scene flow (ZeroFlow, DeFlow, an Argoverse 2 challenge
 entry) on the second sweep: DIR/<log>/<timestamp_ns>.feather (or DIR/<timestamp_ns>.feather
 for one log) with flow_tx_m, flow_ty_m, flow_tz_m, one row per point of the sweep as the
 log holds it; each pair is fitted as SweepRegistration.fit([a | a + flow], sweep=next).
 
---ground says what becomes of the ground points of LiDAR logs:
+--ground says what becomes of the ground points of LiDAR logs, as in 'mmreg register':
   - auto (default): where the log has a map (Argoverse 2 logs with map/), the map's
     ground points go to the estimator when its fit takes them ('ground', 'sweep_ground'),
-    else they are dropped as with drop; without a map they are kept;
+    else they are dropped as with drop; without a map (KITTI, bags, folders) Patchwork++
+    finds the ground of a z-up sweep and it joins the static world;
   - keep: registered as ordinary points;
-  - drop: removed before the fit, by the map's rule (a log without a map fails).
+  - drop: left out of the fit (labelled -1, moving with the static world), by the map's
+    rule where there is one, else as found by Patchwork++.
+The summary's ground column says what was done (masks, dropped, found, kept) and
+n_ground how many points of the first sweep were ground.
 
 Capture times: an Argoverse 2 sweep pair (or a bag's, with a per-point time field) hands
 the capture time of every point (the sweep files' offset_ns, seconds after each sweep's
@@ -77,12 +90,16 @@ timings, status, what it was fitted on, and the scores when the truth is known);
 run.json (the dataset and the options).
 
 Run the same command again after an interruption (Ctrl-C, a crash, a lost worker): jobs
-whose complete result is in --out are skipped. A job that fails is a row with its error;
-the others go on, and the next run retries it (exit code 1 while any job fails).
+whose complete result is in --out are skipped. A job records the size and modification
+time of every file it reads: one whose files changed since runs again (the summary's
+changed_input column names the file, and a line says how many). A job that fails is a
+row with its error; the others go on, and the next run retries it (exit code 1 while
+any job fails).
 
 --out must be new, an empty folder, or an earlier 'mmreg run' of the same dataset and
 options (it is then resumed); a folder holding other files is never touched. Another
-dataset or other options need --overwrite, which runs every job again.
+dataset or other options need --overwrite, which runs every job again, unless the
+earlier run has no result at all (every job failed): that one is simply replaced.
 
 With --scheduler, the workers must have mmreg installed and read DATASET at the same
 path (a shared file system); the results come back to this machine.
@@ -95,8 +112,10 @@ examples:
   mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --pairs truth
   mmreg run /data/kitti/odometry/sequences/08 --out kitti-08
   mmreg run drive.bag --topic /velodyne_points --out drive
-  mmreg run frames/ --out result --method robust --tau 1.5
-  mmreg run lidar_frames/ --pairs sweeps --out result
+  mmreg run /data/kitti/odometry/sequences --out kitti-all
+  mmreg run lidar_frames/ --out result
+  mmreg run mixed_frames/ --pattern '*.bin' --out result
+  mmreg run particles/ --pairs aligned --out result --method robust --tau 1.5
 """
 
 METHODS = ("sweep", "robust", "paper")
@@ -163,9 +182,9 @@ def add_arguments(parser):
         "--pairs",
         choices=PAIRS,
         default="auto",
-        help="what a job fits: 'sweeps', two raw sweeps (LiDAR logs' default); 'truth', "
-        "an Argoverse 2 log's ground-truth flow (the fit sees the answer); 'aligned' frames "
-        "(frames' default); see above",
+        help="what a job fits: 'sweeps', two raw sweeps (the default for LiDAR logs and "
+        "frames); 'truth', an Argoverse 2 log's ground-truth flow (the fit sees the "
+        "answer); 'aligned', index-aligned frames; see above",
     )
     parser.add_argument(
         "--flow",
@@ -181,12 +200,20 @@ def add_arguments(parser):
         help="a ROS bag's PointCloud2 topic (needed only when the bag has several)",
     )
     parser.add_argument(
+        "--pattern",
+        metavar="GLOB",
+        default=None,
+        help="a folder of frames or sweep files: the files that are frames (e.g. '*.bin'); "
+        "needed when it holds frames of several kinds",
+    )
+    parser.add_argument(
         "--ground",
         choices=GROUND,
         default="auto",
-        help="LiDAR logs' ground points: 'auto' hands the map's ground to an estimator "
-        "that takes it (else as drop; no map: as keep), 'keep' registers them as any "
-        "point, 'drop' removes them (map rule)",
+        help="LiDAR logs' ground points, as in 'mmreg register': 'auto' hands the map's "
+        "ground to an estimator that takes it (else as drop; no map: Patchwork++'s ground "
+        "joins the static world), 'keep' registers them as any point, 'drop' leaves them "
+        "out (the map's rule, else Patchwork++)",
     )
     parser.add_argument(
         "--keep-ground",
@@ -228,7 +255,7 @@ def _configuration(args):
         "max_iter": args.max_iter,
         "seed": args.seed,
         "mmreg": __version__,
-    }
+    } | ({} if getattr(args, "pattern", None) is None else {"pattern": args.pattern})
 
 
 def _foreign(out):
@@ -269,11 +296,20 @@ def check_run_out(out, configuration, *, overwrite):
         if (out / "run.json").exists():
             earlier = json.loads((out / "run.json").read_text()).get("configuration")
     if earlier != configuration:
+        if not _holds_results(out):  # every job failed: nothing to keep
+            return False
         raise CLIError(
             f"{out}: holds the results of another dataset or other options; pass --overwrite "
             "to replace them, or choose another --out"
         )
     return True
+
+
+def _holds_results(out):
+    """Whether ``out`` holds a job's result (an earlier run whose jobs all failed does
+    not: it may be replaced by a run with other options, such as an error's advice)."""
+    jobs = Path(out) / "jobs"
+    return jobs.is_dir() and any(p.suffix == ".npz" for p in jobs.iterdir())
 
 
 def _estimator(args, jobs):
@@ -307,20 +343,21 @@ def default_out(args):
 
 def run(args):
     from mmreg import io as mmio
+    from mmreg._cli._lidar_input import option_words
     from mmreg.runner import (
+        _SWEEP_JOBS,
         Argoverse2PairJob,
-        Argoverse2SweepPairJob,
         dataset_jobs,
         run_dataset,
     )
-    from mmreg.runner._jobs import SequenceSweepPairJob
 
     if importlib.util.find_spec("distributed") is None:
         raise CLIError("'mmreg run' needs dask.distributed: pip install 'mmreg[dask]'")
     if args.out is None:
         args.out = default_out(args)
     out = Path(args.out)
-    with reading(args.dataset), _missing_reader():  # a listing: no job is loaded yet
+    # A listing: no job is loaded yet.
+    with reading(args.dataset), _missing_reader(), option_words():
         jobs = dataset_jobs(
             args.dataset,
             layout=args.layout,
@@ -329,10 +366,10 @@ def run(args):
             capture_times=args.capture_times,
             flow=args.flow,
             topic=args.topic,
+            pattern=args.pattern,
         )
     lidar = args.pairs == "sweeps" or any(
-        isinstance(job, (Argoverse2PairJob, Argoverse2SweepPairJob, SequenceSweepPairJob))
-        for job in jobs
+        isinstance(job, (*_SWEEP_JOBS, Argoverse2PairJob)) for job in jobs
     )
     args.tau = resolve_tau(args.tau, lidar)
     configuration = _configuration(args)
@@ -378,6 +415,14 @@ def run(args):
         if scores:
             means = summary[scores].mean(numeric_only=True)
             print("mean " + ", ".join(f"{name} {value:.3f}" for name, value in means.items()))
+        changed = summary.get("changed_input")
+        changed = summary[changed.astype(bool)] if changed is not None else changed
+        if changed is not None and len(changed):
+            first = changed.iloc[0]
+            print(
+                f"{plural(len(changed), 'job')} run again: a file read changed since the "
+                f"earlier run (e.g. {first['job']}: {first['changed_input']})"
+            )
         flows = ", av2_scene_flow/" if (out / "av2_scene_flow").is_dir() else ""
         print(f"written: {out}/ (jobs/{flows}, summary.parquet, summary.csv, run.json)")
     if len(failed):

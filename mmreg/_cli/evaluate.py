@@ -1,5 +1,6 @@
 """``mmreg evaluate``: score a result directory against the ground truth."""
 
+import argparse
 import contextlib
 import json
 import math
@@ -58,7 +59,29 @@ measures that need it are n/a.
 """
 
 
+class _IntermixedParser(argparse.ArgumentParser):
+    """Options may come between RESULT and TRUTH (``RUN --job J TRUTH``).
+
+    argparse fills every positional at the first run of positionals it meets, so an
+    optional TRUTH after an option was left over; an intermixed parse takes the options
+    out first (Python 3.13 parses this case itself).
+    """
+
+    _mixing = False
+
+    def parse_known_args(self, args=None, namespace=None):
+        if self._mixing:  # parse_known_intermixed_args calls this one, twice
+            return super().parse_known_args(args, namespace)
+        self._mixing = True
+        try:
+            return self.parse_known_intermixed_args(args, namespace)
+        finally:
+            self._mixing = False
+
+
 def add_arguments(parser):
+    # This subcommand's parser alone reads options between its positionals.
+    parser.__class__ = type("EvaluateParser", (_IntermixedParser, type(parser)), {})
     parser.add_argument(
         "pred_dir",
         metavar="RESULT",

@@ -53,11 +53,18 @@ INPUT is one of
     Argoverse 2 .feather (x y z, and offset_ns: the capture times);
   - a sequence: a ROS 1 .bag, a ROS 2 bag (its folder, .db3 or .mcap) with a
     sensor_msgs/PointCloud2 topic (--topic, needed when it holds several; needs
-    pip install "mmreg[ros]"), a KITTI sequence folder (velodyne/*.bin), an Argoverse 2 log
-    (sensors/lidar/*.feather) or a folder of frame files (in name order): --frame K
-    (default 0) registers frame K (the a-points) against frame K+1 (the second sweep).
+    pip install "mmreg[ros]"), a KITTI or SemanticKITTI sequence folder (velodyne/*.bin),
+    an Argoverse 2 log (sensors/lidar/*.feather) or a folder of frame files (in name
+    order; --pattern GLOB picks one kind when it holds several): --frame K (default 0)
+    registers frame K (the a-points) against frame K+1 (the second sweep). The
+    sequence's poses, where it has them, start the ego-motion ICP: a KITTI sequence's
+    poses.txt with its calib.txt (the camera's poses), or a poses.txt alone, read as
+    the LiDAR's own (as nuScenes-to-KITTI conversions write them; a warning says so).
 --target, --flow and --sweep take every point format above too. Invalid LiDAR returns
-(NaN or all-zero rows) are read as they are.
+(NaN or all-zero rows) are read as they are. Rows given as pairs (an (n, 6) array, or
+--target) must pair each point with where it went: two LiDAR sweeps of the same size
+stacked row by row (row i of one scan with row i of the other, the same ray, not the
+same point) are refused; register those with --sweep.
 
 --sweep S names the second sweep as its own points (any size, any order). With
 correspondences (an array, or a cloud with --target or --flow) the default variant
@@ -127,6 +134,7 @@ examples:
   mmreg register LOG/sensors/lidar/T0.feather --sweep LOG/sensors/lidar/T1.feather
   mmreg register drive.bag --topic /velodyne_points --frame 10
   mmreg register dataset/sequences/08 --frame 100
+  mmreg register scans/ --pattern '*.bin' --frame 3
 """
 
 
@@ -153,8 +161,8 @@ TAU_SWEEPS = 5.0
 TAU_CORRESPONDENCES = 1.5
 TAU_RULE = (
     f"'auto': {TAU_SWEEPS:g} for LiDAR sweeps (register --sweep, a LiDAR file or log or a "
-    f"z-up sweep as INPUT; run --pairs sweeps or a LiDAR log), else {TAU_CORRESPONDENCES:g} "
-    "(correspondences, the paper's)"
+    f"z-up sweep as INPUT; run: pairs of sweeps, the default for logs and frames), else "
+    f"{TAU_CORRESPONDENCES:g} (correspondences, the paper's)"
 )
 
 
@@ -319,6 +327,13 @@ def _add_sweep_options(parser):
         default=None,
         help="the bag's sensor_msgs/PointCloud2 topic (needed when it holds several)",
     )
+    sequence.add_argument(
+        "--pattern",
+        metavar="GLOB",
+        default=None,
+        help="a folder of frame files: the files that are frames (e.g. '*.bin'); needed "
+        "when it holds frames of several kinds",
+    )
     timing = parser.add_argument_group(
         "capture times", "with --sweep, all three together (see above): deskew moving objects"
     )
@@ -460,6 +475,12 @@ def _read_sequence_input(args, other):
         args.sweep_interval = interval_between(first.timestamp, second.timestamp, args.input)
     args.frames = {"frame": first.index, "topic": getattr(sequence, "topic", None)}
     args.frames["sources"] = [first.source, second.source]
+    if getattr(args, "ego_motion", None) is None and other is None:
+        with reading(args.input):  # the poses (a KITTI poses.txt): the ego ICP's start
+            if getattr(sequence, "poses", None) is not None:
+                motion = sequence.ego_motion(first.index, second.index)
+                args.sequence_ego_motion = (motion[:3, :3], motion[:3, 3])
+                args.frames["ego_motion_from"] = "poses"
     a = _check_size(first.points, args)
     if other is None:
         return a
@@ -471,7 +492,27 @@ def _read_sequence_input(args, other):
     if len(values) != len(a):
         raise CLIError(f"{path}: {len(values):,} rows for the {len(a):,} points of {first.source}")
     X = np.hstack([a, values if args.target is not None else a + values])
-    return check_correspondences(X, path)
+    X = check_correspondences(X, path)
+    if args.target is not None:
+        check_rows(X, args, f"{first.source} and --target {args.target}")
+    return X
+
+
+def check_rows(X, args, where):
+    """A CLIError when the rows of X are two LiDAR sweeps stacked row by row (row i of one
+    scan with row i of the other) rather than points and where they went."""
+    from mmreg._validation import NotCorrespondencesError
+    from mmreg.sweeps._stacked_rows import check_rows_follow_motion
+
+    target = getattr(args, "target", None)
+    if target is not None:
+        advice = f"Register two sweeps as sweeps: --sweep {target} instead of --target."
+    else:
+        advice = "Register two sweeps as sweeps: mmreg register SWEEP0 --sweep SWEEP1."
+    try:
+        check_rows_follow_motion(X[:, :3], X[:, 3:], where=where, advice=advice)
+    except NotCorrespondencesError as error:
+        raise CLIError(one_line(error)) from None
 
 
 def read_input(args):
@@ -506,7 +547,11 @@ def read_input(args):
                     "size and order use --sweep"
                 ) from None
             raise
-    return _check_size(check_correspondences(X, args.input), args, "correspondences")
+    X = _check_size(check_correspondences(X, args.input), args, "correspondences")
+    if args.flow is None and sweep is None:  # rows given as pairs: are they?
+        where = args.input if args.target is None else f"{args.input} and --target {args.target}"
+        check_rows(X, args, where)
+    return X
 
 
 def read_masks(path, n):
@@ -736,6 +781,8 @@ def _fit(X, init, args, steps, sweep=None, timing=None):
         )
     params = {} if sweep is None else {"sweep": sweep} | (timing or {})
     ego = read_ego_motion(args)
+    if ego is None and sweep is not None and X.shape[1] == 3:
+        ego = getattr(args, "sequence_ego_motion", None)  # a sequence's poses
     if ego is not None:
         if sweep is not None and X.shape[1] != 3:
             raise CLIError(
@@ -896,9 +943,11 @@ def default_out(args):
     paths += [getattr(args, name, None) for name in ("sweep", "times", "sweep_times")]
     key = "\0".join(str(Path(p).resolve()) for p in paths if p is not None)
     stem = Path(args.input).stem
-    if is_sequence(args.input):  # one result per frame (and topic)
+    if is_sequence(args.input):  # one result per frame (and topic, and pattern)
         frame = getattr(args, "frame", None) or 0
         key += f"\0{frame}\0{getattr(args, 'topic', None)}"
+        if getattr(args, "pattern", None) is not None:
+            key += f"\0{args.pattern}"
         stem += f"-frame{frame}"
     digest = hashlib.sha256(key.encode("utf-8", "surrogateescape")).hexdigest()[:8]
     return f"{stem}-mmreg-{digest}"

@@ -50,7 +50,10 @@ Kinds
     a KITTI odometry / SemanticKITTI sequence folder: ``velodyne/*.bin``, and optionally
     ``times.txt`` (seconds), ``poses.txt`` (or KITTI odometry's ``../../poses/NN.txt``:
     the left camera's poses, 12 numbers a line) with ``calib.txt`` (its ``Tr``: velodyne
-    to camera), from which ``pose = inv(Tr) @ P @ Tr`` (the velodyne's pose).
+    to camera), from which ``pose = inv(Tr) @ P @ Tr`` (the velodyne's pose). A
+    ``poses.txt`` without ``calib.txt`` holds the LiDAR's own poses (conversions of
+    nuScenes to this layout), read as they are, with a warning. Both files are read
+    when first needed.
 :class:`Argoverse2Sweeps` (``kind="argoverse2"``)
     an Argoverse 2 log folder (``sensors/lidar/<timestamp_ns>.feather``) or its
     ``sensors/lidar`` folder: ``timestamp`` from the file name, ``times`` =
@@ -79,13 +82,14 @@ Examples
 ('kitti', 3, 2, [2.0, 2.0, 2.0], None)
 """
 
+import functools
 import os
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from mmreg._warnings import warn
 from mmreg.io import _lidar as _lidar_files
 from mmreg.io._checks import _check_readable
 from mmreg.io._correspondences import _read_point_file
@@ -105,16 +109,31 @@ FRAME_SUFFIXES = (".ply", ".pcd", ".xyz", ".npy", ".pcd.bin", ".bin", ".feather"
 _AV2_NAME = re.compile(r"^(\d+)\.feather$")
 
 
-@dataclass
 class Frame:
-    """One LiDAR frame of a sequence (see :mod:`mmreg.datasets._sequences`)."""
+    """One LiDAR frame of a sequence (see :mod:`mmreg.datasets._sequences`).
 
-    points: np.ndarray
-    timestamp: float | None
-    times: np.ndarray | None
-    index: int
-    source: str
-    pose: np.ndarray | None = None
+    ``pose`` may be given as a function of no argument, called on the first read of
+    ``frame.pose``: a sequence whose poses file is broken still gives its points.
+    """
+
+    __slots__ = ("index", "points", "source", "times", "timestamp", "_pose")
+
+    def __init__(self, points, timestamp, times, index, source, pose=None):
+        self.points, self.timestamp, self.times = points, timestamp, times
+        self.index, self.source, self._pose = index, source, pose
+
+    @property
+    def pose(self):
+        """4 x 4 pose of the sensor (x_world = pose @ x_frame), or None."""
+        if callable(self._pose):
+            self._pose = self._pose()
+        return self._pose
+
+    def __repr__(self):
+        return (
+            f"Frame(index={self.index}, source={self.source!r}, points={len(self.points)}, "
+            f"timestamp={self.timestamp!r})"
+        )
 
 
 class _Sequence:
@@ -141,8 +160,8 @@ class _Sequence:
         return f"{type(self).__name__}({str(self.path)!r}, frames={len(self)})"
 
     def _pose(self, k):
-        poses = getattr(self, "poses", None)
-        return None if poses is None else poses[k].copy()
+        """Frame ``k``'s pose as :class:`Frame` takes it: read when asked for."""
+        return functools.partial(_pose_of, self, k)
 
     def ego_motion(self, i, j):
         """4 x 4 motion of the static world from frame ``i`` to frame ``j``: ``inv(P_j) P_i``.
@@ -158,6 +177,11 @@ class _Sequence:
             if not -n <= k < n:
                 raise IndexError(f"{self.path}: frame {k} out of range; it has {n} frame(s).")
         return np.linalg.inv(poses[j]) @ poses[i]
+
+
+def _pose_of(sequence, k):
+    poses = getattr(sequence, "poses", None)
+    return None if poses is None else poses[k].copy()
 
 
 def _read_frame_file(path):
@@ -232,6 +256,10 @@ def _kitti_tr(path):
 class KittiSequence(_Sequence):
     """A KITTI odometry or SemanticKITTI sequence folder: ``velodyne/*.bin`` frames.
 
+    The poses and times are read when first asked for (``poses``, ``timestamps``, a
+    frame's ``pose`` or ``timestamp``, :meth:`ego_motion`): a broken or missing file
+    fails only what needs it.
+
     Parameters
     ----------
     path : str or path-like
@@ -243,9 +271,12 @@ class KittiSequence(_Sequence):
     names : list of str
         The ``.bin`` file names, in order.
     poses : ndarray of shape (n_frames, 4, 4) or None
-        The velodyne's pose of every frame, ``inv(Tr) @ P @ Tr`` from the camera poses
+        The velodyne's pose of every frame: ``inv(Tr) @ P @ Tr`` from the camera poses
         ``P`` (``poses.txt`` in the folder, else ``../../poses/<folder name>.txt``) and
-        ``calib.txt``'s ``Tr``; None without a poses file.
+        ``calib.txt``'s ``Tr``; a ``poses.txt`` without a ``calib.txt`` beside it is
+        read as the LiDAR's own poses, as conversions of other datasets to the
+        SemanticKITTI layout (nuScenes) write them, with a warning saying so. None
+        without a poses file.
     timestamps : ndarray of shape (n_frames,) or None
         ``times.txt`` (seconds), or None.
     """
@@ -265,28 +296,54 @@ class KittiSequence(_Sequence):
             raise ValueError(f"{velodyne}: no .bin scans.")
         self.names = files
         self._files = [velodyne / name for name in files]
-        n = len(files)
-        self.timestamps = None
-        if (self.path / "times.txt").is_file():
-            times = _kitti_matrices(self.path / "times.txt", 1, "frame times")[:, 0]
-            self.timestamps = self._matching(times, n, self.path / "times.txt", "times")
-        self.poses = None
+
+    # Plain properties (not functools.cached_property, whose frame is not mmreg's): the
+    # poses' warning names the user's line.
+    @property
+    def timestamps(self):
+        if "_timestamps" not in vars(self):
+            self._timestamps = self._read_timestamps()
+        return self._timestamps
+
+    @property
+    def poses(self):
+        if "_poses" not in vars(self):
+            self._poses = self._read_poses()
+        return self._poses
+
+    def _read_timestamps(self):
+        path = self.path / "times.txt"
+        if not path.is_file():
+            return None
+        times = _kitti_matrices(path, 1, "frame times")[:, 0]
+        return self._matching(times, len(self), path, "times")
+
+    def _read_poses(self):
+        n = len(self)
         poses_path = self.path / "poses.txt"
-        if not poses_path.is_file():
+        beside = poses_path.is_file()
+        if not beside:
             poses_path = self.path.parent.parent / "poses" / f"{self.path.name}.txt"
-        if poses_path.is_file():
-            camera = _kitti_matrices(poses_path, 12, "poses (3 x 4 row-major)")
-            camera = self._matching(camera, n, poses_path, "poses")
-            calib = self.path / "calib.txt"
-            if not calib.is_file():
-                raise FileNotFoundError(
-                    f"{calib}: no such file; {poses_path} holds the camera's poses, and "
-                    "calib.txt's Tr turns them into the velodyne's."
+        if not poses_path.is_file():
+            return None
+        matrices = _kitti_matrices(poses_path, 12, "poses (3 x 4 row-major)")
+        P = np.tile(np.eye(4), (n, 1, 1))
+        P[:, :3] = self._matching(matrices, n, poses_path, "poses").reshape(n, 3, 4)
+        calib = self.path / "calib.txt"
+        if not calib.is_file():
+            if beside:  # a conversion's LiDAR poses (nuScenes to SemanticKITTI)
+                warn(
+                    f"{poses_path}: no calib.txt beside it, so its poses are read as the "
+                    "LiDAR's own (as conversions of nuScenes to the SemanticKITTI layout "
+                    "write them); for KITTI's camera poses, add the sequence's calib.txt."
                 )
-            tr = _kitti_tr(calib)
-            P = np.tile(np.eye(4), (n, 1, 1))
-            P[:, :3] = camera.reshape(n, 3, 4)
-            self.poses = np.linalg.inv(tr) @ P @ tr
+                return P
+            raise FileNotFoundError(
+                f"{calib}: no such file; {poses_path} holds the camera's poses, and "
+                "calib.txt's Tr turns them into the velodyne's."
+            )
+        tr = _kitti_tr(calib)
+        return np.linalg.inv(tr) @ P @ tr
 
     def _matching(self, values, n, path, what):
         if len(values) != n:
@@ -407,9 +464,10 @@ class FrameFolder(_Sequence):
                 kinds[_frame_suffix(n)] = kinds.get(_frame_suffix(n), 0) + 1
             if len(kinds) > 1:
                 listed = ", ".join(f"{count} {s}" for s, count in sorted(kinds.items()))
+                first = sorted(kinds)[0]
                 raise ValueError(
                     f"{self.path}: holds frames of several kinds ({listed}); choose one with "
-                    "a pattern (pattern='*.bin')."
+                    f"pattern='*{first}' (on the command line: --pattern '*{first}')."
                 )
         if not names:
             raise ValueError(

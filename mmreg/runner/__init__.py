@@ -3,8 +3,10 @@
 :func:`run_dataset` fits a copy of the estimator on every job of a dataset (see
 :func:`dataset_jobs`) on a Dask cluster through joblib's ``"dask"`` backend (the
 machinery ``paper/`` sweeps with), writes each job's result into ``OUT/jobs/<name>.npz``
-whole or not at all, skips the jobs whose complete result is already there, and ends
-with a summary table, one row per job (``OUT/summary.parquet`` and ``summary.csv``).
+whole or not at all, skips the jobs whose complete result is already there (of the same
+job, estimator and input files: a job records the size and modification time of every
+file it reads, ``job.inputs()``, and runs again when one changed), and ends with a
+summary table, one row per job (``OUT/summary.parquet`` and ``summary.csv``).
 
 Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas``,
 ``flow`` (the rigid flow, :attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when
@@ -42,6 +44,13 @@ scores then measure the clustering alone, also flagged by ``truth_fed``,
 Ctrl-C: the workers of the LocalCluster started here ignore SIGINT (a terminal sends it
 to the whole process group); the KeyboardInterrupt is this process's, which closes the
 cluster on its way out.
+
+Ground: a job of a log with a map (Argoverse 2) carries out ``ground="drop"`` itself and
+hands the map's masks with ``"auto"``; without a map (KITTI, bags, folders of sweeps) the
+job's explicit ``"keep"`` or ``"drop"`` is set as the estimator's ``ground`` parameter
+(:class:`~mmreg.SweepRegistration`: Patchwork++ finds the ground), as ``mmreg register``
+does, and the summary's ``ground`` says ``"found"`` (joined to the static world) or
+``"dropped"`` with ``n_ground`` points when the fit found one.
 """
 
 import contextlib
@@ -50,6 +59,7 @@ import inspect
 import json
 import logging
 import math
+import os
 import signal
 import sys
 import time
@@ -286,6 +296,27 @@ def _known_ground(data, model):
     return out, "dropped"
 
 
+def _with_ground_choice(model, data):
+    """``model`` told the job's explicit ground choice, where the job has no map for it.
+
+    Without a map, ``ground="keep"`` or ``"drop"`` is the estimator's to carry out
+    (:class:`~mmreg.SweepRegistration` finds the ground with Patchwork++), as in ``mmreg
+    register``; ``"auto"`` leaves the estimator's own setting.
+    """
+    choice = data.get("ground_choice")
+    if choice not in ("keep", "drop") or data.get("ground_rule") == "dropped":  # by the map
+        return model
+    if "ground" in model.get_params(deep=False):
+        return model.set_params(ground=choice)
+    if choice == "drop":
+        raise ValueError(
+            "ground='drop' (--ground drop): this log has no ground map, and "
+            f"{type(model).__name__} has no 'ground' parameter to find the ground with; "
+            "use SweepRegistration, or ground='auto' or 'keep'."
+        )
+    return model
+
+
 def _picture(X, model, data, name):
     """The PNG bytes of one job's result, drawn as ``mmreg view`` draws it."""
     import io
@@ -316,8 +347,10 @@ def _process(job, estimator, pictures=False):
     row = {"job": job.name, "status": "error"}
     try:
         start = time.perf_counter()
-        data = job.load()
-        model = clone(estimator)
+        with warnings.catch_warnings(record=True) as loading:  # a poses file's note
+            warnings.simplefilter("always")
+            data = job.load()
+        model = _with_ground_choice(clone(estimator), data)
         data, row["ground"] = _known_ground(data, model)
         X = np.asarray(data["X"], dtype=float)
         row["n"] = len(X)
@@ -338,6 +371,10 @@ def _process(job, estimator, pictures=False):
         row["capture_times"] = timed
         if row["ground"] == "masks":
             params.update({key: data[key] for key in _GROUND})
+            row["n_ground"] = int(np.count_nonzero(data["ground"]))
+        poses = sweep is not None and data.get("ego_motion") is not None
+        if poses and "ego_motion" in (_fit_parameters(model) or ()):  # the poses' start
+            params["ego_motion"] = data["ego_motion"]
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -351,8 +388,14 @@ def _process(job, estimator, pictures=False):
             n_outliers=int(np.sum(model.labels_ < 0)),
             n_iter=int(getattr(model, "n_iter_", -1)),
             converged=bool(getattr(model, "converged_", True)),
-            warnings=" | ".join(sorted({str(w.message) for w in caught}))[:500],
+            warnings=" | ".join(sorted({str(w.message) for w in [*loading, *caught]}))[:500],
         )
+        found = getattr(model, "ground_mask_", None)
+        if found is not None and row["ground"] in (None, "kept"):
+            # Found by the estimator (Patchwork++): joined to the static world or left out.
+            dropped = model.get_params(deep=False).get("ground") == "drop"
+            row["ground"] = "dropped" if dropped else "found"
+            row["n_ground"] = int(np.count_nonzero(found))
         row.update(_metrics(X, model, data))
         indices = data.get("indices")
         indices = np.arange(len(X)) if indices is None else np.asarray(indices, dtype=np.int64)
@@ -413,22 +456,63 @@ def read_job_result(path, fingerprint=None):
     result : tuple (arrays, row) or None
         ``arrays``: ``{name: ndarray}``; ``row``: the job's summary row (a dict).
     """
-    try:
-        arrays = _load_npz(path)
-        meta = json.loads(str(arrays.pop("meta")))
-    except (OSError, ValueError, KeyError, TypeError):
+    found = _read_result(path)
+    if found is None:
         return None
-    if any(key not in arrays for key in RESULT_KEYS if key != "meta"):
-        return None
+    arrays, meta = found
     if fingerprint is not None and meta.get("fingerprint") != fingerprint:
         return None
     return arrays, meta["row"]
 
 
-def _write_result(path, arrays, row, fingerprint):
+def _read_result(path):
+    """``(arrays, meta)`` of a complete result file, or None."""
+    try:
+        arrays = _load_npz(path)
+        meta = json.loads(str(arrays.pop("meta")))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if any(key not in arrays for key in RESULT_KEYS if key != "meta") or "row" not in meta:
+        return None
+    return arrays, meta
+
+
+def _input_stamps(job):
+    """``{path: [size, mtime_ns]}`` of the files ``job`` reads (``job.inputs()``; None for a
+    file that is missing), or None for a job that does not say what it reads."""
+    inputs = getattr(job, "inputs", None)
+    if not callable(inputs):
+        return None
+    stamps = {}
+    for path in inputs() or ():
+        try:
+            stat = os.stat(path)
+        except OSError:
+            stamps[str(path)] = None
+        else:
+            stamps[str(path)] = [stat.st_size, stat.st_mtime_ns]
+    return stamps
+
+
+def _changed_input(stamps, earlier):
+    """The first input whose size or modification time differs from ``earlier`` (the
+    stamps recorded with a result), "" when none; a result without stamps, of a job
+    that has some, counts as changed (its first input)."""
+    if stamps is None:
+        return ""
+    if not isinstance(earlier, dict):
+        return next(iter(stamps), "?")
+    for path in sorted(set(stamps) | set(earlier)):
+        if stamps.get(path) != earlier.get(path):
+            return path
+    return ""
+
+
+def _write_result(path, arrays, row, fingerprint, inputs=None):
     from mmreg import io as mmio
 
-    meta = json.dumps({"fingerprint": fingerprint, "row": row}, default=_json_value)
+    meta = {"fingerprint": fingerprint, "row": row, "inputs": inputs}
+    meta = json.dumps(meta, default=_json_value)
     with mmio.atomic_write(path) as handle:
         np.savez(handle, **arrays, meta=np.array(meta))
 
@@ -574,7 +658,9 @@ def run_dataset(
     ``estimator`` and sends back the arrays, which are written to ``out/jobs/<name>.npz``
     (to a temporary file in that folder, then :func:`os.replace`: whole or not at all).
     A job whose complete result for this estimator is already there is not run again,
-    so an interrupted run resumes where it stopped. A job that raises becomes a row
+    so an interrupted run resumes where it stopped, unless a file it reads changed since
+    (a job's ``inputs()`` names its files; their sizes and modification times are kept
+    with the result). A job that raises becomes a row
     with ``status="error"`` and its message; the others go on, and the next run retries
     it.
 
@@ -635,10 +721,13 @@ def run_dataset(
         are not scored. ``capture_times``: whether ``fit`` was given the points' capture
         times; ``ground``: whether the map's ground masks were handed to ``fit``
         (``"masks"``), the ground rows dropped (``"dropped"``: ``ground="drop"``, or
-        ``"auto"`` with a ``fit`` that takes no masks) or kept (``"kept"``); ``pairs``: what it was
-        fitted on (``"sweeps"``, ``"flow"``, ``"truth"``, ``"correspondences"``) and
-        ``truth_fed``: whether that was the ground-truth flow; ``n_file``: rows of the
-        first sweep's file.
+        ``"auto"`` with a ``fit`` that takes no masks, or found by the estimator and left
+        out) or kept (``"kept"``), or found by the estimator and joined to the static
+        world (``"found"``), with ``n_ground`` its points; ``changed_input``: for a job
+        run again because a file it reads changed since the earlier result, that file;
+        ``pairs``: what it was fitted on (``"sweeps"``, ``"flow"``, ``"truth"``,
+        ``"correspondences"``) and ``truth_fed``: whether that was the ground-truth flow;
+        ``n_file``: rows of the first sweep's file.
 
     Examples
     --------
@@ -647,15 +736,16 @@ def run_dataset(
     >>> import numpy as np
     >>> from distributed import LocalCluster
     >>> from mmreg import MultiModelRegistration
-    >>> from mmreg.runner import run_dataset
+    >>> from mmreg.runner import dataset_jobs, run_dataset
     >>> rng = np.random.default_rng(0)
     >>> frame = rng.uniform(-1, 1, (200, 3))
     >>> with tempfile.TemporaryDirectory() as folder, LocalCluster(
     ...         n_workers=1, processes=False, dashboard_address=":0") as cluster:
-    ...     for k in range(3):
+    ...     for k in range(3):  # index-aligned frames: row i moves with row i
     ...         np.save(Path(folder) / f"frame{k}.npy", frame + [0.1 * k, 0, 0])
     ...     est = MultiModelRegistration(init=np.zeros(200, int), variant="paper")
-    ...     summary = run_dataset(folder, est, Path(folder) / "out",
+    ...     jobs = dataset_jobs(folder, pairs="aligned")
+    ...     summary = run_dataset(jobs, est, Path(folder) / "out",
     ...                           scheduler=cluster.scheduler_address, progress=False)
     >>> summary[["job", "status", "n", "n_clusters"]].values.tolist()
     [['frame0__frame1', 'done', 200, 1], ['frame1__frame2', 'done', 200, 1]]
@@ -683,14 +773,23 @@ def run_dataset(
     out = Path(out)
     (out / JOBS_FOLDER).mkdir(parents=True, exist_ok=True)
     fingerprints = {job.name: _fingerprint(job, estimator) for job in jobs}
-    rows, todo = {}, []
+    # What each job reads, as it is now: a result of other inputs is run again.
+    stamps = {job.name: _input_stamps(job) for job in jobs}
+    rows, todo, changed = {}, [], {}
     for job in jobs:
         found = None
         if not overwrite:
-            found = read_job_result(_result_path(out, job.name), fingerprints[job.name])
+            found = _read_result(_result_path(out, job.name))
+        if found is not None and found[1].get("fingerprint") != fingerprints[job.name]:
+            found = None
+        if found is not None:
+            changed[job.name] = _changed_input(stamps[job.name], found[1].get("inputs"))
+            if changed[job.name]:
+                found = None
         if found is None:
             todo.append(job)
         else:
+            found = (found[0], found[1]["row"])
             rows[job.name] = found[1] | {"resumed": True}
             relative = getattr(job, "challenge", "")
             if relative and not (out / SCENE_FLOW_FOLDER / relative).is_file():
@@ -713,14 +812,19 @@ def run_dataset(
                     if arrays is not None and _PICTURE in arrays:
                         _write_picture(out, name, arrays.pop(_PICTURE))
                     if arrays is not None:
-                        _write_result(_result_path(out, name), arrays, row, fingerprints[name])
+                        path = _result_path(out, name)
+                        _write_result(path, arrays, row, fingerprints[name], stamps[name])
                         _write_sweep_flow(out, by_name[name], arrays)
                     rows[name] = row | {"resumed": False}
+                    if changed.get(name):
+                        rows[name]["changed_input"] = changed[name]
                     bar.update(1)
                     _interrupt.check()  # a Ctrl-C that a callback swallowed stops here
     frame = pd.DataFrame([rows[job.name] for job in jobs])
     columns = SUMMARY_COLUMNS + [c for c in frame.columns if c not in SUMMARY_COLUMNS]
     frame = frame.reindex(columns=columns)
-    frame["error"] = frame["error"].astype(object).where(frame["error"].notna(), "")
+    for column in ("error", "changed_input"):
+        if column in frame:
+            frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
     _write_table(frame, out)
     return frame

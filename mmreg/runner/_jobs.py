@@ -25,17 +25,22 @@ and ``sweep_ground`` (m,): the map's ground points. ``pairs`` says what the fit 
 * a KITTI odometry or SemanticKITTI sequence (``velodyne/*.bin``), a ROS bag's
   PointCloud2 topic, or a folder of LiDAR sweep files (``.bin``, ``.pcd.bin``,
   ``.feather``), read by :func:`mmreg.datasets.open_sequence`: the same, frame by frame,
-  without truth;
+  without truth (with the sequence's poses, when it has them, as the ICP's start); a
+  folder of sequences (KITTI's ``sequences/`` holding ``00``, ``01``, ...): the jobs of
+  every sequence, named ``<sequence>_<frame>``, a sequence that cannot be read one failed
+  job;
 * a folder of frames (``*.ply``, ``*.pcd``, ``*.xyz``, or ``*.npy`` of shape (n, 3)), in
-  name order: one job per consecutive pair, frame ``k + 1`` giving the b-points of frame
-  ``k`` row by row (the clouds must be index-aligned), or with ``pairs="sweeps"`` two raw
-  sweeps of any sizes and orders;
+  name order: one job per consecutive pair, two raw sweeps of any sizes and orders, or
+  with ``pairs="aligned"`` frame ``k + 1`` giving the b-points of frame ``k`` row by row
+  (the clouds must be index-aligned: two LiDAR scans stacked row by row are refused, see
+  :mod:`mmreg.sweeps._stacked_rows`);
 * a folder of correspondence files (``*.npy`` (n, 6), ``*.npz``, ``*.csv``, ``*.txt``):
   one job per file. An ``.npz`` may also hold the truth: ``labels`` (n,) and ``flow``
   (n, 3).
 """
 
 import dataclasses
+import functools
 import os
 import re
 from collections import Counter
@@ -71,6 +76,8 @@ __all__ = [
 ]
 
 FRAME_EXTENSIONS = (".ply", ".pcd", ".xyz")
+# LiDAR sweep files: a folder of them only is a sequence (open_sequence reads it).
+SWEEP_EXTENSIONS = (".pcd.bin", ".bin", ".feather")
 CORRESPONDENCE_EXTENSIONS = (".npy", ".npz", ".csv", ".txt")
 PAIRS = ("auto", "sweeps", "truth", "aligned")
 GROUND = ("auto", "keep", "drop")
@@ -80,22 +87,38 @@ LAYOUTS = ("auto", "argoverse2", "sequence", "frames", "correspondences")
 
 @dataclasses.dataclass(frozen=True)
 class FramePairJob:
-    """Frame ``source`` and the next frame ``target``, index-aligned (b_i = target row i)."""
+    """Frame ``source`` and the next frame ``target``, index-aligned (b_i = target row i).
+
+    Two LiDAR sweeps stacked row by row are refused (their rows pair rays, not points:
+    :func:`mmreg.sweeps._stacked_rows.check_rows_follow_motion`).
+    """
 
     name: str
     source: str
     target: str
 
+    def inputs(self):
+        """The files the job reads."""
+        return (self.source, self.target)
+
     def load(self):
+        from mmreg.sweeps._stacked_rows import check_rows_follow_motion
+
         a = read_point_file(self.source, "the frame's points")
         b = read_point_file(self.target, "the next frame's points")
         if len(a) != len(b):
             raise ValueError(
                 f"{self.target}: holds {len(b)} points but {self.source} holds {len(a)}; "
-                "consecutive frames must be index-aligned (row i of one is row i of the other); "
-                "for raw sweeps of any sizes and orders use pairs='sweeps' "
-                "('mmreg run --pairs sweeps')."
+                "with pairs='aligned' (--pairs aligned) consecutive frames must be "
+                "index-aligned (row i of one is row i of the other); for raw sweeps of any "
+                "sizes and orders leave pairs at 'auto' (drop --pairs aligned)."
             )
+        check_rows_follow_motion(
+            a,
+            b,
+            where=f"{self.source} and {self.target}",
+            advice="Register them as two sweeps: leave pairs at 'auto' (drop --pairs aligned).",
+        )
         return {"X": np.hstack([a, b])}
 
 
@@ -107,10 +130,14 @@ class SweepPairJob:
     source: str
     target: str
 
+    def inputs(self):
+        """The files the job reads."""
+        return (self.source, self.target)
+
     def load(self):
         a = read_point_file(self.source, "the first sweep's points")
         sweep = read_point_file(self.target, "the second sweep's points")
-        return {"X": a, "sweep": sweep}
+        return {"X": a, "sweep": sweep, "pairs": "sweeps"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,6 +146,10 @@ class CorrespondenceFileJob:
 
     name: str
     path: str
+
+    def inputs(self):
+        """The files the job reads."""
+        return (self.path,)
 
     def load(self):
         from mmreg import io as mmio
@@ -163,15 +194,11 @@ def _pair_data(
     ground points (two boolean arrays) or None; ``flow``: correspondences for every row of
     ``a`` (a network's flow or the truth) or None (raw sweeps); ``truth``: ``(labels,
     flow)`` of every row of ``a``, or None. The rows used are ``indices`` (all of them,
-    or those off the ground with ``ground="drop"``).
+    or those off the map's ground with ``ground="drop"``). Without a map, ``ground``
+    goes to the estimator (``ground_choice``): SweepRegistration finds the ground itself
+    (Patchwork++) and keeps it, joins it to the static world or drops it.
     """
-    if ground == "drop":
-        if masks is None:
-            raise ValueError(
-                f"{where}: has no ground map (an Argoverse 2 log's map/ folder, with the "
-                "ego poses), so its ground is unknown: --ground drop needs it; use --ground "
-                "auto or keep."
-            )
+    if ground == "drop" and masks is not None:
         keep, keep_sweep = ~masks[0], ~masks[1]
     else:
         keep, keep_sweep = np.ones(len(a), bool), np.ones(len(sweep), bool)
@@ -180,7 +207,8 @@ def _pair_data(
     if flow is not None:
         X = np.hstack([X, X + flow[indices]])
     data = {"X": X, "sweep": sweep[keep_sweep], "indices": indices, "sweep_points": a}
-    data["ground_rule"] = "dropped" if ground == "drop" else "kept"
+    data["ground_rule"] = "dropped" if ground == "drop" and masks is not None else "kept"
+    data["ground_choice"] = ground
     if ground == "auto" and masks is not None:
         data["ground"], data["sweep_ground"] = masks[0][indices], masks[1][keep_sweep]
     if (
@@ -192,6 +220,30 @@ def _pair_data(
     if truth is not None:
         data["labels_true"], data["flow_true"] = truth[0][indices], truth[1][indices]
     return data
+
+
+@functools.lru_cache(maxsize=64)
+def _log_files(log_dir):
+    """The files an Argoverse 2 log's jobs read besides their sweeps: annotations, poses,
+    map (listed once per log)."""
+    log_dir = Path(log_dir)
+    files = [log_dir / "annotations.feather", log_dir / "city_SE3_egovehicle.feather"]
+    if (log_dir / "map").is_dir():
+        files += sorted(p for p in (log_dir / "map").iterdir() if p.is_file())
+    return tuple(str(p) for p in files)
+
+
+@functools.lru_cache(maxsize=64)
+def _log_sweeps(log_dir):
+    """An Argoverse 2 log's sweep files, by timestamp (listed once per log)."""
+    lidar = Path(log_dir) / "sensors" / "lidar"
+    names = [e.name for e in os.scandir(lidar) if _SWEEP_FILE.match(e.name)]
+    return tuple(str(lidar / n) for n in sorted(names, key=lambda n: int(n.split(".")[0])))
+
+
+def _log_inputs(log_dir, index, *extra):
+    sweeps = _log_sweeps(str(log_dir))
+    return (*sweeps[index : index + 2], *_log_files(str(log_dir)), *(e for e in extra if e))
 
 
 class _PartialLog(_Log):
@@ -262,6 +314,10 @@ class Argoverse2PairJob:
     ground: str = "auto"
     challenge: str = ""
 
+    def inputs(self):
+        """The files the job reads: its two sweeps, the log's annotations, poses and map."""
+        return _log_inputs(self.log_dir, self.index)
+
     def load(self):
         log = _PartialLog(self.log_dir)
         if not log.has_annotations:
@@ -311,6 +367,11 @@ class Argoverse2SweepPairJob:
     flow: str = ""
     challenge: str = ""
 
+    def inputs(self):
+        """The files the job reads: its two sweeps, the log's annotations, poses and map,
+        the flow."""
+        return _log_inputs(self.log_dir, self.index, self.flow)
+
     def load(self):
         log = _PartialLog(self.log_dir)
         pair = log.sweep_pair(self.index)
@@ -335,11 +396,16 @@ class Argoverse2SweepPairJob:
 
 @dataclasses.dataclass(frozen=True)
 class BrokenLogJob:
-    """A log whose sweeps cannot even be listed: one failed row, the other logs go on."""
+    """A log (or a sequence) whose sweeps cannot even be listed: one failed row, the other
+    logs go on."""
 
     name: str
     log_dir: str
     error: str
+
+    def inputs(self):
+        """None read: it never leaves a result to resume."""
+        return ()
 
     def load(self):
         raise ValueError(self.error)
@@ -422,11 +488,15 @@ class SequenceSweepPairJob:
     """Frames ``index`` and ``index + 1`` of a LiDAR sequence (a KITTI sequence, a ROS bag).
 
     Read by :func:`mmreg.datasets.open_sequence` (``topic``: a bag's PointCloud2
-    topic). ``X`` is the first frame's returns (rows that are NaN or all zero, the
-    sensor's "no return", are left out: ``indices`` are the rows used), ``sweep`` the
-    next frame's; with ``capture_times``, the frames' per-point ``times`` (a bag's
-    ``t`` / ``time`` field) and the interval between their timestamps. No ground map
-    (``ground="drop"`` fails), no truth.
+    topic; ``pattern``: the frame files of a folder). ``X`` is the first frame's returns
+    (rows that are NaN or all zero, the sensor's "no return", are left out: ``indices``
+    are the rows used), ``sweep`` the next frame's; with ``capture_times``, the frames'
+    per-point ``times`` (a bag's ``t`` / ``time`` field) and the interval between their
+    timestamps; with the sequence's poses (a KITTI ``poses.txt``), ``ego_motion``: the
+    static world's motion between the frames, ``(rotation, translation)``, the ICP's
+    start. No ground map (``ground`` goes to the estimator: ``ground_choice``), no truth.
+    ``files``: the files it reads (its two frames, a KITTI sequence's poses, calibration
+    and times), for :meth:`inputs`.
     """
 
     name: str
@@ -435,11 +505,22 @@ class SequenceSweepPairJob:
     ground: str = "auto"
     capture_times: bool = True
     topic: str | None = None
+    pattern: str | None = None
+    files: tuple = ()
+
+    def inputs(self):
+        """The files the job reads (a bag: its file, or every file of a ROS 2 bag folder)."""
+        if self.files:
+            return self.files
+        path = Path(self.path)
+        if path.is_dir():
+            return tuple(sorted(str(p) for p in path.iterdir() if p.is_file()))
+        return (self.path,)
 
     def load(self):
         from mmreg.datasets import open_sequence
 
-        sequence = open_sequence(self.path, topic=self.topic)
+        sequence = open_sequence(self.path, topic=self.topic, pattern=self.pattern)
         first, second = sequence[self.index], sequence[self.index + 1]
         valid, sweep_valid = _valid_rows(first.points), _valid_rows(second.points)
         if not valid.any() or not sweep_valid.any():
@@ -464,10 +545,28 @@ class SequenceSweepPairJob:
         )
         data["indices"] = np.flatnonzero(valid)[data["indices"]]
         data["sweep_points"] = first.points
+        if getattr(sequence, "poses", None) is not None:
+            motion = sequence.ego_motion(self.index, self.index + 1)
+            data["ego_motion"] = (motion[:3, :3], motion[:3, 3])
         return data | {"pairs": "sweeps"}
 
 
-def _is_sequence(path):
+def _sweep_file(path):
+    """Whether ``path`` is a LiDAR sweep file (KITTI ``.bin``, nuScenes ``.pcd.bin``, an
+    Argoverse 2 ``<timestamp_ns>.feather``)."""
+    from mmreg.io._lidar import lidar_kind
+
+    return lidar_kind(path) in ("kitti", "nuscenes") or bool(_SWEEP_FILE.match(Path(path).name))
+
+
+def _listed(folder, pattern=None):
+    """The files of ``folder`` (not hidden), or those matching ``pattern``, by name."""
+    if pattern is not None:
+        return sorted(p for p in folder.glob(pattern) if p.is_file())
+    return sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
+
+
+def _is_sequence(path, pattern=None):
     """A KITTI sequence folder, a ROS bag (a ``.bag``, ``.db3``, ``.mcap`` or folder), or a
     folder of LiDAR sweep files (KITTI ``.bin``, nuScenes ``.pcd.bin``, ``.feather``)."""
     from mmreg.io._lidar import lidar_kind
@@ -477,25 +576,74 @@ def _is_sequence(path):
         return True
     if not path.is_dir() or _is_argoverse2_log(path):
         return False
-    if (path / "velodyne").is_dir():
+    if pattern is None and (path / "velodyne").is_dir():
         return True
     # Sweep files only: a log's own tables (annotations.feather, ...) are not sweeps.
-    files = [p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")]
-    return bool(files) and all(
-        lidar_kind(p) in ("kitti", "nuscenes") or _SWEEP_FILE.match(p.name) for p in files
-    )
+    files = _listed(path, pattern)
+    return bool(files) and all(_sweep_file(p) for p in files)
 
 
-def _sequence_jobs(path, ground, capture_times, topic):
+def _sequence_files(sequence, k):
+    """The files frames ``k`` and ``k + 1`` of ``sequence`` are read from, with a KITTI
+    sequence's poses, calibration and times (a bag: none, the job names the bag)."""
+    files = getattr(sequence, "_files", None)
+    if files is None:
+        return ()
+    found = [str(files[k]), str(files[k + 1])]
+    if sequence.kind == "kitti":
+        root = sequence.path
+        extra = [root / "poses.txt", root / "calib.txt", root / "times.txt"]
+        extra.append(root.parent.parent / "poses" / f"{root.name}.txt")
+        found += [str(p) for p in extra if p.is_file()]
+    return tuple(found)
+
+
+def _sequence_jobs(path, ground, capture_times, topic, pattern=None, prefix=""):
     from mmreg.datasets import open_sequence
 
-    sequence = open_sequence(path, topic=topic)
+    sequence = open_sequence(path, topic=topic, pattern=pattern)
     bag = sequence.kind == "bag"
     names = [f"{k:06d}" if bag else Path(name).stem for k, name in enumerate(sequence.names)]
     return [
-        SequenceSweepPairJob(names[k], str(path), k, ground, capture_times, topic)
+        SequenceSweepPairJob(
+            f"{prefix}{names[k]}",
+            str(path),
+            k,
+            ground,
+            capture_times,
+            topic,
+            pattern,
+            _sequence_files(sequence, k),
+        )
         for k in range(len(sequence) - 1)
     ]
+
+
+def _sequence_folders(folder):
+    """The KITTI sequences a folder holds (``NN/velodyne``), or those of its
+    ``sequences/`` folder (a KITTI root), by name; empty when neither."""
+    for root in (folder, folder / "sequences"):
+        if root.is_dir():
+            found = sorted(p for p in root.iterdir() if p.is_dir() and (p / "velodyne").is_dir())
+            if found:
+                return found
+    return []
+
+
+def _sequences_jobs(folders, ground, capture_times):
+    """The jobs of every sequence, ``<sequence>_<frame>``; one that cannot be read, or has
+    one frame, is one failed job (as a log of an Argoverse 2 split)."""
+    jobs = []
+    for folder in folders:
+        try:
+            found = _sequence_jobs(folder, ground, capture_times, None, prefix=f"{folder.name}_")
+        except (OSError, ValueError) as error:
+            found = [BrokenLogJob(folder.name, str(folder), " ".join(str(error).split()))]
+        if not found:
+            error = f"{folder / 'velodyne'}: one scan only; a job is a pair of scans."
+            found = [BrokenLogJob(folder.name, str(folder), error)]
+        jobs += found
+    return jobs
 
 
 def dataset_jobs(
@@ -507,6 +655,7 @@ def dataset_jobs(
     capture_times=True,
     flow=None,
     topic=None,
+    pattern=None,
     drop_ground=None,
 ):
     """The jobs of the dataset at ``path`` (a folder), in a stable order.
@@ -515,31 +664,38 @@ def dataset_jobs(
     ----------
     path : str or path-like
         An Argoverse 2 log or a folder of logs (a split), a KITTI odometry or
-        SemanticKITTI sequence (``velodyne/*.bin``), a ROS bag, a folder of frames or of
+        SemanticKITTI sequence (``velodyne/*.bin``) or a folder of them (KITTI's
+        ``sequences/``, or the root holding it), a ROS bag, a folder of frames or of
         correspondence files.
     layout : {"auto", "argoverse2", "sequence", "frames", "correspondences"}, default="auto"
         What the path holds; ``"auto"``: an Argoverse 2 log or folder of logs if it
         looks like one (``sensors/lidar``), a sequence (read by
-        :func:`mmreg.datasets.open_sequence`) if it is a KITTI sequence (``velodyne/``)
-        or a ROS bag (``.bag``, ``.db3``, ``.mcap``, a ROS 2 bag folder), else frames
-        when the files are point clouds or (n, 3) ``.npy`` arrays, else correspondence
-        files.
+        :func:`mmreg.datasets.open_sequence`) if it is a KITTI sequence (``velodyne/``),
+        a folder of them, a ROS bag (``.bag``, ``.db3``, ``.mcap``, a ROS 2 bag folder)
+        or a folder of LiDAR sweep files only (``.bin``, ``.pcd.bin``,
+        ``<timestamp_ns>.feather``), else frames when the files are point clouds or
+        (n, 3) ``.npy`` arrays, else correspondence files.
     ground : {"auto", "keep", "drop"}, default="auto"
-        LiDAR logs: ``"drop"`` removes the ground points before the fit (an Argoverse 2
-        log's map rule; a log without a map fails), ``"keep"`` fits them as any other
-        point, ``"auto"`` keeps them and, when the log has a map, gives the map's ground
-        masks (``ground``, ``sweep_ground``); :func:`mmreg.runner.run_dataset` hands
-        them to an estimator whose ``fit`` names them and drops the ground rows for any
-        other (as ``"drop"``).
+        LiDAR logs: ``"drop"`` removes the ground points before the fit, by the map's
+        rule on an Argoverse 2 log with a map; ``"keep"`` fits them as any other point;
+        ``"auto"`` gives the map's ground masks (``ground``, ``sweep_ground``) when the
+        log has a map; :func:`mmreg.runner.run_dataset` hands them to an estimator whose
+        ``fit`` names them and drops the ground rows for any other (as ``"drop"``).
+        Where there is no map (KITTI, bags, folders, an Argoverse 2 log without one), the
+        choice goes to the estimator as its ``ground`` parameter
+        (:class:`mmreg.SweepRegistration`: Patchwork++ finds the ground, which joins
+        the static world with ``"auto"``, is left out with ``"drop"``, and is registered
+        as any point with ``"keep"``); ``"auto"`` leaves the estimator's own setting.
     pairs : {"auto", "sweeps", "truth", "aligned"}, default="auto"
         What a job fits. ``"sweeps"``: two raw sweeps or frames of any sizes and orders,
         registered from the points alone by :class:`mmreg.SweepRegistration` (the
-        default for LiDAR logs), or with ``flow`` a network's flow refined on the second
-        sweep. ``"truth"``: an Argoverse 2 log's ground-truth flow as the
+        default for LiDAR logs and frames), or with ``flow`` a network's flow refined on
+        the second sweep. ``"truth"``: an Argoverse 2 log's ground-truth flow as the
         correspondences (the fit sees the answer; its summary row says so).
         ``"aligned"``: index-aligned frames (row ``i`` of frame ``k + 1`` matches row
-        ``i`` of frame ``k``; the default for frames; on an Argoverse 2 log the same as
-        ``"truth"``). Correspondence files are their own pairs.
+        ``i`` of frame ``k``, as a simulation's particles; two LiDAR scans stacked row
+        by row are refused); on an Argoverse 2 log the same as ``"truth"``.
+        Correspondence files are their own pairs.
     capture_times : bool, default=True
         Argoverse 2 sweep pairs: hand the points' capture times (``offset_ns``) and the
         interval between the sweeps to the estimator, whose ``fit`` deskews the moving
@@ -553,6 +709,9 @@ def dataset_jobs(
     topic : str, default=None
         A ROS bag's ``sensor_msgs/PointCloud2`` topic; needed only when the bag holds
         several.
+    pattern : str, default=None
+        A glob (``"*.bin"``) choosing the files of a folder of frames or sweeps; needed
+        when it holds frames of several kinds.
     drop_ground : bool, default=None
         Deprecated spelling of ``ground``: True is ``"drop"``, False ``"keep"``.
 
@@ -560,8 +719,8 @@ def dataset_jobs(
     -------
     jobs : list
         Of FramePairJob, SweepPairJob, CorrespondenceFileJob, Argoverse2PairJob,
-        Argoverse2SweepPairJob, SequenceSweepPairJob or (a log of a split that cannot be
-        read: one failed row) BrokenLogJob.
+        Argoverse2SweepPairJob, SequenceSweepPairJob or (a log of a split or a sequence
+        of a folder of them that cannot be read: one failed row) BrokenLogJob.
 
     Raises
     ------
@@ -579,24 +738,37 @@ def dataset_jobs(
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     for k in range(3):
     ...         np.save(Path(folder) / f"frame{k}.npy", np.zeros((5, 3)))
-    ...     [job.name for job in dataset_jobs(folder)]
-    ['frame0__frame1', 'frame1__frame2']
+    ...     jobs = dataset_jobs(folder)
+    >>> [(type(job).__name__, job.name) for job in jobs]
+    [('SweepPairJob', 'frame0__frame1'), ('SweepPairJob', 'frame1__frame2')]
     """
     _check_choice(layout, "layout", LAYOUTS)
     _check_choice(pairs, "pairs", PAIRS)
     ground = _ground_choice(ground, drop_ground)
     if not isinstance(capture_times, (bool, np.bool_)):
         raise TypeError(f"capture_times must be True or False; got {capture_times!r}.")
+    if pattern is not None and not isinstance(pattern, str):
+        raise TypeError(f"pattern must be a str (a glob such as '*.bin'); got {pattern!r}.")
     capture_times = bool(capture_times)
     folder = Path(path)
     if not folder.exists():
         raise FileNotFoundError(f"{folder}: no such folder (the dataset).")
-    if layout == "sequence" or (layout == "auto" and flow is None and _is_sequence(folder)):
+    sequences = [] if pattern is not None or not folder.is_dir() else _sequence_folders(folder)
+    if layout in ("auto", "sequence") and flow is None and sequences:
+        if pairs in ("truth", "aligned"):
+            raise ValueError(f"{folder}: KITTI sequences have no flow to fit on; pairs='sweeps'.")
+        if topic is not None:
+            raise ValueError(f"{folder}: topic= (--topic) applies to a ROS bag only.")
+        return _check_some(_sequences_jobs(sequences, ground, capture_times), folder)
+    if layout == "sequence" or (
+        layout == "auto" and flow is None and _is_sequence(folder, pattern)
+    ):
         if pairs in ("truth", "aligned"):
             raise ValueError(
                 f"{folder}: a KITTI sequence or a bag has no flow to fit on; pairs='sweeps'."
             )
-        return _check_some(_sequence_jobs(folder, ground, capture_times, topic), folder)
+        jobs = _sequence_jobs(folder, ground, capture_times, topic, pattern)
+        return _check_some(jobs, folder)
     if topic is not None:
         raise ValueError(f"{folder}: topic= (--topic) applies to a ROS bag only.")
     if not folder.is_dir():
@@ -607,7 +779,7 @@ def dataset_jobs(
         if pairs not in ("auto", "sweeps"):
             raise ValueError(f"flow is refined on raw sweeps; pairs={pairs!r} takes none.")
     truth = "truth" if pairs in ("truth", "aligned") else "sweeps"
-    if layout in ("auto", "argoverse2"):
+    if layout in ("auto", "argoverse2") and pattern is None:
         options = (ground, truth, capture_times, "" if flow is None else str(flow))
         if _is_argoverse2_log(folder):
             return _check_some(_argoverse2_jobs(folder, *options), folder)
@@ -615,10 +787,10 @@ def dataset_jobs(
         if logs:
             jobs = [job for log in logs for job in _argoverse2_jobs(log, *options, f"{log.name}_")]
             return _check_some(jobs, folder)
-        if layout == "argoverse2":
-            raise ValueError(
-                f"{folder}: not an Argoverse 2 log (no sensors/lidar) nor a folder of logs."
-            )
+    if layout == "argoverse2":
+        raise ValueError(
+            f"{folder}: not an Argoverse 2 log (no sensors/lidar) nor a folder of logs."
+        )
     if flow is not None:
         raise ValueError(
             f"{folder}: not an Argoverse 2 log nor a folder of logs; a flow folder "
@@ -629,21 +801,41 @@ def dataset_jobs(
             f"{folder}: pairs='truth' fits an Argoverse 2 log's ground-truth flow; this "
             "folder is no Argoverse 2 log."
         )
-    files = sorted(
-        p
-        for p in folder.iterdir()
-        if p.is_file()
-        and not p.name.startswith(".")
-        and p.suffix.lower() in (*FRAME_EXTENSIONS, *CORRESPONDENCE_EXTENSIONS)
-    )
+    return _file_jobs(folder, layout, pairs, pattern)
+
+
+def _kinds(files):
+    """``"3 .bin, 3 .pcd"``: how many files of each kind."""
+    counts = Counter(_suffix(p) for p in files)
+    return ", ".join(f"{count} {suffix}" for suffix, count in sorted(counts.items()))
+
+
+def _suffix(path):
+    name = path.name.lower()
+    return next((s for s in SWEEP_EXTENSIONS if name.endswith(s)), path.suffix.lower())
+
+
+def _file_jobs(folder, layout, pairs, pattern):
+    """The jobs of a folder of frames or of correspondence files."""
+    known = (*FRAME_EXTENSIONS, *SWEEP_EXTENSIONS, *CORRESPONDENCE_EXTENSIONS)
+    files = [p for p in _listed(folder, pattern) if _suffix(p) in known]
     if not files:
+        where = f"{folder}: no file matches {pattern!r}" if pattern else f"{folder}: no frames"
         raise ValueError(
-            f"{folder}: no frames ({', '.join(FRAME_EXTENSIONS)}, .npy) nor correspondence "
-            f"files ({', '.join(CORRESPONDENCE_EXTENSIONS)}) in it."
+            f"{where} ({', '.join(FRAME_EXTENSIONS)}, .npy, LiDAR sweeps "
+            f"{', '.join(SWEEP_EXTENSIONS)}) nor correspondence files "
+            f"({', '.join(CORRESPONDENCE_EXTENSIONS)})."
+        )
+    sweeps = [p for p in files if _sweep_file(p)]
+    if sweeps and len(sweeps) < len(files):
+        first = _suffix(sweeps[0])
+        raise ValueError(
+            f"{folder}: holds LiDAR sweeps and other files ({_kinds(files)}); choose one "
+            f"kind with pattern='*{first}' (--pattern '*{first}')."
         )
     if layout == "auto":
         suffixes = {p.suffix.lower() for p in files}
-        if suffixes <= set(FRAME_EXTENSIONS):
+        if sweeps or suffixes <= set(FRAME_EXTENSIONS):
             layout = "frames"
         elif suffixes == {".npy"}:
             columns = {_npy_columns(p) for p in files}
@@ -657,16 +849,18 @@ def dataset_jobs(
                     f"correspondences (n, 6); found {sorted(map(str, columns))} columns."
                 )
         elif suffixes & set(FRAME_EXTENSIONS):
+            first = sorted(suffixes & set(FRAME_EXTENSIONS))[0]
             raise ValueError(
-                f"{folder}: mixes point clouds and other files ({', '.join(sorted(suffixes))}); "
-                "a dataset folder holds frames or correspondence files, not both."
+                f"{folder}: mixes point clouds and other files ({_kinds(files)}); a dataset "
+                "folder holds frames or correspondence files, not both; choose one kind "
+                f"with pattern='*{first}' (--pattern '*{first}')."
             )
         else:
             layout = "correspondences"
     if layout == "frames":
         if len(files) < 2:
             raise ValueError(f"{folder}: one frame only; a job is a pair of consecutive frames.")
-        kind = SweepPairJob if pairs == "sweeps" else FramePairJob  # auto: aligned
+        kind = FramePairJob if pairs == "aligned" else SweepPairJob  # auto: sweeps
         return [
             kind(f"{first.stem}__{second.stem}", str(first), str(second))
             for first, second in zip(files[:-1], files[1:], strict=True)
