@@ -17,6 +17,7 @@ _LAZY = {
     "MultiModelRegistration": "mmreg.estimators",
     "NaiveRegistration": "mmreg.baselines",
     "SequentialRANSAC": "mmreg.baselines",
+    "SequenceRegistration": "mmreg.estimators",
     "SweepRegistration": "mmreg.estimators",
     "TLinkage": "mmreg.baselines",
 }

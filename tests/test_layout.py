@@ -14,6 +14,7 @@ BENEATH = {
     "mmreg.io": BASE | {"mmreg._array"},
     "mmreg.em": BASE | {"mmreg._array"},
     "mmreg.sweeps": BASE | {"mmreg._array", "mmreg.io"},
+    "mmreg.tracking": BASE | {"mmreg._array", "mmreg.sweeps"},
 }
 
 

@@ -4,6 +4,7 @@ from mmreg.em._paper import EMResult, multi_model_em
 from mmreg.em._robust import RobustEMResult, robust_multi_model_em
 from mmreg.estimators._base import BaseRegistration, DegenerateInputWarning
 from mmreg.estimators._multi_model_registration import MultiModelRegistration, ScaleWarning
+from mmreg.estimators._sequence import SequenceRegistration
 from mmreg.estimators._two_sweeps import SweepRegistration
 
 __all__ = [
@@ -13,6 +14,7 @@ __all__ = [
     "MultiModelRegistration",
     "RobustEMResult",
     "ScaleWarning",
+    "SequenceRegistration",
     "SweepRegistration",
     "multi_model_em",
     "robust_multi_model_em",

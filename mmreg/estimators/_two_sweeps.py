@@ -483,6 +483,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         small_gicp, whose ego motion tells them apart.
     ego_body_mask_ : ndarray of shape (n_samples,), bool
         Which points those are.
+    sweep_ego_body_mask_ : ndarray of shape (m,), bool
+        Raw mode: the same for the points of ``sweep`` (empty without ``sweep``).
+    ego_scale_ : float
+        Raw mode: the robust point-to-plane residual scale of the ego-motion ICP (the
+        noise the islands' tests read residuals in); NaN otherwise.
     ground_mask_ : ndarray of shape (n_samples,) or None
         Raw mode: which points of the first sweep were taken for the ground (all in the
         static world); None when the ground was kept.
@@ -746,6 +751,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         body = np.zeros(len(keep), dtype=bool)
         body[keep] = self.ego_body_mask_
         self.ego_body_mask_ = body
+        if len(keep_sweep):
+            sweep_body = np.zeros(len(keep_sweep), dtype=bool)
+            sweep_body[keep_sweep] = self.sweep_ego_body_mask_
+            self.sweep_ego_body_mask_ = sweep_body
         if self.ground_mask_ is not None:
             ground_mask = np.zeros(len(keep), dtype=bool)
             ground_mask[keep] = self.ground_mask_
@@ -768,6 +777,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         """``fit`` on valid rows: ``X`` validated, invalid returns of both sweeps left out."""
         self.n_ego_body_ = 0
         self.ego_body_mask_ = np.zeros(len(X), dtype=bool)
+        self.sweep_ego_body_mask_ = np.zeros(0 if sweep is None else len(sweep), dtype=bool)
+        self.ego_scale_ = np.nan
         check_coordinate_range(X)
         rng = check_random_state(self.random_state)
         self._resolve_lengths()
@@ -915,6 +926,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self._restore_rows(keep, keep_sweep, 0.0)  # the body stays with the sensor
         self.n_ego_body_ = int(body.sum())
         self.ego_body_mask_ = body
+        self.sweep_ego_body_mask_ = sweep_body
         return self
 
     def _copy_estimator_state(self, estimator):
@@ -1470,6 +1482,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         """
         ego, probe, sigma = self._ego_motion(a, context, known)
         self.ego_motion_ = ego
+        self.ego_scale_ = sigma
         if self.max_displacement == "auto":
             # Other traffic moves about as fast as the sensor: sweeps far apart (2 Hz
             # keyframes) need a reach that grows with the ego motion's step.

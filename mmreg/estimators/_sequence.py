@@ -1,0 +1,730 @@
+"""A whole LiDAR log in, tracks out: every moving object carried from sweep to sweep.
+
+:class:`SequenceRegistration` registers each pair of consecutive sweeps with a pair
+estimator (:class:`~mmreg.SweepRegistration` by default), starting its ego motion from the
+last one (constant velocity, as KISS-ICP does), and keeps the moving objects as tracks in
+the world frame (:mod:`mmreg.tracking`). A track lives inside the registration: its
+predicted motion is tested point by point against the static world's in the next pair
+(:mod:`mmreg.tracking._evidence`), so an object that pair alone misses is still found,
+and a motion that no second pair confirms (a ghost) is never reported.
+"""
+
+from dataclasses import dataclass, field
+from numbers import Integral, Real
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import cKDTree
+from sklearn.base import BaseEstimator, clone
+from sklearn.utils import Bunch, check_random_state
+from sklearn.utils._param_validation import HasMethods, Interval
+
+from mmreg._validation import invalid_rows
+from mmreg.sweeps._ground import is_z_up_sweep
+from mmreg.sweeps._icp import SurfaceNormals
+from mmreg.tracking._evidence import near_points, track_claim
+from mmreg.tracking._level_icp import level_icp, level_part
+from mmreg.tracking._motion import (
+    compose,
+    inverse,
+    predicted_motion,
+    to_matrix,
+    transform,
+    twist_of,
+)
+from mmreg.tracking._tracks import Track, consistent_motion, overlap_matrix
+
+__all__ = ["SequenceRegistration"]
+
+# The one length: tau (5 for metres); the others in its units.
+_METRE_TAU = 5.0
+# Where a track's points may be found around their prediction: this share of tau, plus
+# a quarter of the predicted displacement (a car brakes, a walker turns).
+_NEAR = 0.1
+_MODEL_ERROR = 0.25
+# A track's points that only its motion explains may lie that far from its predicted
+# points (faces come into view); those that the ego motion explains too (a side sliding
+# along itself) this far (this share of tau).
+_TIGHT = 0.05
+# A detection of a moving cluster belongs to the track whose prediction covers at least
+# this share of its points.
+_MIN_OVERLAP = 0.3
+# Two measured motions of one object agree within half the displacement plus this
+# share of tau (the pair's motions are centimetres off; a car brakes or turns).
+_MOTION_TOLERANCE = 0.04
+# The prediction's twist is tried at these shares of its speed.
+_SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
+# Points kept per track (its shape for the prediction and the association).
+_TRACK_POINTS = 2000
+
+
+@dataclass
+class _Frame:
+    """One sweep as the sequence holds it while it is needed."""
+
+    index: int
+    points: np.ndarray  # every row the user gave
+    valid: np.ndarray  # rows that are returns
+    time: float
+    pose: np.ndarray | None = None  # estimated sensor pose (world from sensor)
+    given_pose: np.ndarray | None = None
+    _target: tuple | None = None
+    # Set by the pair of which this frame is the first sweep:
+    pair_labels: np.ndarray | None = None  # the pair's labels of the valid rows
+    pair_flow: np.ndarray | None = None
+    body: np.ndarray | None = None  # valid rows on the ego vehicle's body
+    track_of: np.ndarray | None = None  # track key of each valid row, -1 none
+    motions: dict = field(default_factory=dict)  # track key -> 4 x 4 motion to the next
+    rows: list = field(default_factory=list)  # per-track table rows (key, ...)
+    ego: np.ndarray | None = None  # 4 x 4 ego motion to the next frame
+    up: np.ndarray | None = None  # the vertical, in a z-up LiDAR sweep
+
+    @property
+    def returns(self):
+        return self.points[self.valid]
+
+    def target(self):
+        """``(points, tree, normals)`` of the valid rows, built once."""
+        if self._target is None:
+            points = self.returns
+            tree = cKDTree(points)
+            self._target = (points, tree, SurfaceNormals(points, tree, 10))
+        return self._target
+
+
+def _box(points):
+    """Length, width, height and yaw of the points' box (principal axes in x-y)."""
+    xy = points[:, :2] - points[:, :2].mean(axis=0)
+    if len(points) < 3:
+        yaw = 0.0
+    else:
+        _, vectors = np.linalg.eigh(xy.T @ xy)
+        yaw = float(np.arctan2(vectors[1, 1], vectors[0, 1]))
+    c, s = np.cos(yaw), np.sin(yaw)
+    along = xy @ [c, s]
+    across = xy @ [-s, c]
+    return (
+        float(np.ptp(along)),
+        float(np.ptp(across)),
+        float(np.ptp(points[:, 2])),
+        yaw,
+    )
+
+
+class SequenceRegistration(BaseEstimator):
+    """Moving objects of a LiDAR log, tracked from sweep to sweep.
+
+    Each pair of consecutive sweeps is registered by ``pair_estimator`` (the ego motion
+    started from the last pair's, or from the poses given), and its moving clusters are
+    detections of tracks in the world frame. A track is predicted by a constant twist
+    (velocity and turn rate), associated with the detections that cover its prediction,
+    and tested point by point against the static world in every pair: the points near
+    its prediction that its motion explains on the next sweep and the ego motion does
+    not are its own, even where the pair left them in the static world. A track is
+    confirmed once its motion holds into a second pair; only confirmed tracks label
+    points, so a motion seen in one pair only is never reported. A confirmed track
+    coasts through up to ``max_misses`` frames without evidence (an occlusion) and keeps
+    its id.
+
+    Parameters
+    ----------
+    pair_estimator : estimator or None, default=None
+        Registers two raw sweeps: ``fit(points1, sweep=points2, ego_motion=(R, t))`` with
+        ``labels_``, ``moving_``, ``static_cluster_``, ``rotations_``, ``translations_``,
+        ``flow_`` and ``ego_motion_``. None: ``SweepRegistration(random_state=...)``.
+    tau : float, default=5.0
+        The one length, in the points' units (5 for metres, as the pair estimator's).
+    lookahead : int, default=1
+        Frames after frame ``k`` whose pairs may still change its labels (a track born
+        in frame ``k`` is confirmed in frame ``k + 1``). ``partial_fit`` gives frame
+        ``k``'s result once frame ``k + lookahead + 1`` is in.
+    max_misses : int, default=3
+        Frames a confirmed track coasts on its prediction without evidence.
+    frame_rate : float or None, default=None
+        Frames per second, for velocities in units per second when ``times`` are not
+        given; None: velocities per frame.
+    random_state : int, RandomState instance or None, default=None
+
+    Attributes
+    ----------
+    labels_ : list of ndarray
+        Per frame, per point: 0 the static world, ``k >= 1`` a track (the same object in
+        every frame), -1 outliers, the ego vehicle's body and invalid returns.
+    moving_ : list of ndarray of bool
+        Per frame, per point: whether it belongs to a moving track.
+    flows_ : list of ndarray
+        Per frame, per point: its motion to the next frame (NaN in the last frame and
+        for invalid returns).
+    ego_poses_ : ndarray of shape (n_frames, 4, 4)
+        The sensor's pose in each frame (world from sensor), the first the identity or
+        the first pose given.
+    tracks_ : pandas.DataFrame
+        One row per confirmed track and frame it is seen in: ``track``, ``frame``,
+        ``time``, centroid ``x, y, z`` (world), box ``length, width, height, yaw``,
+        velocity ``vx, vy, vz``, ``speed``, ``yaw_rate`` and ``points``.
+    n_frames_ : int
+    n_tracks_ : int
+        Confirmed tracks.
+    """
+
+    _parameter_constraints: dict = {
+        "pair_estimator": [HasMethods(["fit"]), None],
+        "tau": [Interval(Real, 0, None, closed="neither")],
+        "lookahead": [Interval(Integral, 0, None, closed="left")],
+        "max_misses": [Interval(Integral, 0, None, closed="left")],
+        "frame_rate": [Interval(Real, 0, None, closed="neither"), None],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(
+        self,
+        pair_estimator=None,
+        *,
+        tau=5.0,
+        lookahead=1,
+        max_misses=3,
+        frame_rate=None,
+        random_state=None,
+    ):
+        self.pair_estimator = pair_estimator
+        self.tau = tau
+        self.lookahead = lookahead
+        self.max_misses = max_misses
+        self.frame_rate = frame_rate
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ public API
+    def fit(self, frames, y=None, *, times=None, poses=None):
+        """Register a whole log.
+
+        Parameters
+        ----------
+        frames : sequence of array-like of shape (n_k, 3)
+            The sweeps in order, each in its sensor's frame (or a sequence from
+            :func:`mmreg.datasets.open_sequence`).
+        y : Ignored
+        times : array-like of shape (n_frames,) or None
+            Each frame's time in seconds.
+        poses : array-like of shape (n_frames, 4, 4) or None
+            Known sensor poses (odometry): the ego motions start from them.
+
+        Returns
+        -------
+        self
+        """
+        self._validate_params()
+        n = len(frames)
+        if n < 2:
+            raise ValueError(f"a log needs at least 2 frames; got {n}.")
+        times = self._check_times(times, n)
+        poses = self._check_poses(poses, n)
+        self._reset()
+        results = []
+        for k in range(n):
+            frame = frames[k]
+            points = getattr(frame, "points", frame)
+            self._step(
+                points, None if times is None else times[k], None if poses is None else poses[k]
+            )
+            results.extend(self.finished_)
+        results.extend(self._close())
+        self.labels_ = [r.labels for r in results]
+        self.moving_ = [r.moving for r in results]
+        self.flows_ = [r.flow for r in results]
+        self.ego_poses_ = np.stack([r.pose for r in results])
+        tables = [r.tracks for r in results if len(r.tracks)]
+        self.tracks_ = (
+            pd.concat(tables, ignore_index=True).sort_values(["track", "frame"], ignore_index=True)
+            if tables
+            else self._table([])
+        )
+        self.n_frames_ = n
+        self.n_tracks_ = int(self.tracks_["track"].nunique()) if len(self.tracks_) else 0
+        return self
+
+    def partial_fit(self, points, y=None, *, time=None, pose=None):
+        """Add the next frame of a log, causally, in bounded memory.
+
+        Frame ``k``'s result is final once frame ``k + lookahead + 1`` is in: each call
+        puts the frames it makes final in ``finished_`` (a list, usually of one), and
+        :meth:`finish` ends the log. Only the tracks and the last ``lookahead + 2``
+        frames are kept, so a log of any length takes the memory of a few frames.
+
+        Parameters
+        ----------
+        points : array-like of shape (n, 3)
+            The next sweep, in its sensor's frame.
+        y : Ignored
+        time : float or None
+            Its time in seconds (None: ``frame_rate``, else its index).
+        pose : array-like of shape (4, 4) or None
+            Its known sensor pose (odometry), from which its ego motion starts.
+
+        Returns
+        -------
+        self
+        """
+        if not hasattr(self, "_state"):
+            self._validate_params()
+            self._reset()
+        if pose is not None:
+            pose = self._check_poses(np.asarray(pose, dtype=float)[None], 1)[0]
+        self._step(points, time, pose)
+        return self
+
+    def finish(self):
+        """End an online log: ``finished_`` holds the frames still pending, the last one
+        included (its labels carried from the frame before, its flow NaN), and the next
+        :meth:`partial_fit` starts a new log."""
+        if not hasattr(self, "_state"):
+            raise ValueError("finish() ends a log that partial_fit() started; none was.")
+        self.finished_ = self._close()
+        del self._state
+        return self
+
+    # ------------------------------------------------------------------ state
+    def _reset(self):
+        self._state = _LogState(rng=check_random_state(self.random_state))
+        self.finished_ = []
+
+    def _check_times(self, times, n):
+        if times is None:
+            return None
+        times = np.asarray(times, dtype=float)
+        if times.shape != (n,) or not np.all(np.isfinite(times)):
+            raise ValueError(f"times must be {n} finite numbers, one per frame.")
+        if np.any(np.diff(times) <= 0):
+            raise ValueError("times must increase from frame to frame.")
+        return times
+
+    def _check_poses(self, poses, n):
+        if poses is None:
+            return None
+        poses = np.asarray(poses, dtype=float)
+        if poses.shape != (n, 4, 4) or not np.all(np.isfinite(poses)):
+            raise ValueError(f"poses must have shape ({n}, 4, 4) and be finite.")
+        return poses
+
+    def _time(self, index, time):
+        if time is not None:
+            return float(time)
+        return index / self.frame_rate if self.frame_rate is not None else float(index)
+
+    def _step(self, points, time, pose):
+        state = self._state
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] < 3:
+            raise ValueError(f"a frame must have shape (n, 3); got {points.shape}.")
+        points = points[:, :3]
+        valid = ~invalid_rows(np.hstack([points, points]))
+        index = state.n_frames
+        frame = _Frame(index, points, valid, self._time(index, time), given_pose=pose)
+        if valid.sum() >= 3 and is_z_up_sweep(points[valid]):
+            frame.up = np.array([0.0, 0.0, 1.0])
+        if state.previous is None:
+            frame.pose = np.eye(4) if pose is None else np.asarray(pose, dtype=float)
+        else:
+            if frame.time <= state.previous.time:
+                raise ValueError(f"frame {index}: its time does not follow the last frame's.")
+            self._register_pair(state.previous, frame)
+            state.pending.append(state.previous)
+        state.previous = frame
+        state.n_frames += 1
+        ready = [f for f in state.pending if f.index <= index - 1 - self.lookahead]
+        state.pending = [f for f in state.pending if f.index > index - 1 - self.lookahead]
+        self.finished_ = [self._result(f) for f in ready]
+
+    def _close(self):
+        state = self._state
+        last = state.previous
+        frames = state.pending + ([last] if last is not None else [])
+        state.pending = []
+        results = [self._result(f) for f in frames if f is not last]
+        if last is not None:
+            results.append(self._last_result(last))
+        return results
+
+    # ------------------------------------------------------------------ one pair
+    def _pair_estimator(self):
+        if self.pair_estimator is not None:
+            return clone(self.pair_estimator)
+        from mmreg.estimators._two_sweeps import SweepRegistration
+
+        return SweepRegistration(random_state=self._state.rng.randint(2**31 - 1))
+
+    def _ego_start(self, previous, frame):
+        """The ego motion's start: the poses given, else the last ego motion (constant
+        velocity), scaled to this interval; None for the first pair."""
+        if previous.given_pose is not None and frame.given_pose is not None:
+            return compose(inverse(frame.given_pose), previous.given_pose)
+        last = self._state.last_ego
+        if last is None:
+            return None
+        motion, dt = last
+        ratio = (frame.time - previous.time) / dt
+        omega, velocity = twist_of(motion, np.zeros(3), 1.0)
+        return predicted_motion(omega, velocity, np.zeros(3), ratio)
+
+    def _register_pair(self, previous, frame):
+        """One step: register the pair, then predict, associate and update the tracks.
+
+        ``previous`` is the first sweep; its labels are what this pair and the tracks
+        say of it. ``frame`` (the second sweep) gets its pose.
+        """
+        state = self._state
+        state.last_first = previous
+        dt = frame.time - previous.time
+        pair = self._fit_pair(previous, frame, dt)
+        first = previous.returns
+        predictions = self._predict(previous.time, previous.pose)
+        detections = pair.detections
+        overlap = overlap_matrix(
+            [first[rows] for rows, _ in detections.values()],
+            [points for points, _ in predictions],
+            [radius for _, radius in predictions],
+        )
+        column = {j: i for i, j in enumerate(detections)}
+        free = ~(pair.ground | previous.body)
+        for rows, _ in detections.values():
+            free[rows] = False
+        previous.track_of = np.full(len(first), -1, dtype=np.intp)
+        seen = {}  # track key -> points detected in ``previous``
+        # The confirmed and longest-lived tracks choose first: two tracks born on two
+        # pieces of one object must not take it in turns.
+        tracks = state.tracks
+        order = sorted(range(len(tracks)), key=lambda i: (not tracks[i].confirmed, -tracks[i].hits))
+        for i in order:
+            track = tracks[i]
+            mine = [j for j in detections if overlap[column[j], i] >= _MIN_OVERLAP]
+            found = self._track_detection(
+                track, previous, frame, pair, [detections[j] for j in mine], predictions[i], free
+            )
+            if found is None:
+                continue
+            rows, motion = found
+            free[rows] = False
+            self._observe(track, previous, frame, rows, motion, dt)
+            seen[track.key] = len(rows)
+            for j in mine:
+                del detections[j]
+        # Moving clusters no track holds: tentative tracks.
+        for rows, motion in detections.values():
+            track = self._born(previous, frame, rows, motion, dt)
+            seen[track.key] = len(rows)
+        self._confirm_and_end(previous, seen)
+
+    def _fit_pair(self, previous, frame, dt):
+        """Register the two sweeps; the first sweep's labels, flow, body and ground, and
+        the moving clusters as detections ``{j: (rows, 4 x 4 motion)}``."""
+        state = self._state
+        start = self._ego_start(previous, frame)
+        first, second = previous.returns, frame.returns
+        estimator = self._pair_estimator()
+        kwargs = {} if start is None else {"ego_motion": (start[:3, :3], start[:3, 3])}
+        pair = estimator.fit(first, sweep=second, **kwargs)
+        ego = to_matrix(*pair.ego_motion_)
+        state.last_ego = (ego, dt)
+        previous.ego = ego
+        frame.pose = compose(previous.pose, inverse(ego))
+        labels = np.asarray(pair.labels_)
+        previous.pair_labels = labels
+        previous.pair_flow = np.asarray(pair.flow_)
+        previous.body = _mask(getattr(pair, "ego_body_mask_", None), len(first))
+        frame.body = _mask(getattr(pair, "sweep_ego_body_mask_", None), len(second))
+        static = int(pair.static_cluster_)
+        detections = {
+            j: (
+                np.flatnonzero(labels == j),
+                to_matrix(pair.rotations_[j], pair.translations_[j]),
+            )
+            for j in np.flatnonzero(np.asarray(pair.moving_, dtype=bool))
+            if j != static and np.any(labels == j)
+        }
+        scale = float(getattr(pair, "ego_scale_", np.nan))
+        return _Pair(
+            ego=ego,
+            scale=scale if np.isfinite(scale) and scale > 0 else 0.002 * self.tau,
+            ground=_mask(getattr(pair, "ground_mask_", None), len(first)),
+            detections=detections,
+        )
+
+    def _predict(self, time, pose):
+        """Every track's points predicted to ``time``, in the sensor frame at ``pose``,
+        and how far from them its points may be found."""
+        to_sensor = inverse(pose)
+        # The first prediction repeats the motion the last pair measured: only the
+        # object's shape changes (faces come into view). Coasting adds the model's error.
+        return [
+            (
+                transform(to_sensor, track.predicted_points(time)),
+                _NEAR * self.tau * (1 + track.misses)
+                + _MODEL_ERROR
+                * np.linalg.norm(track.velocity)
+                * (time - track.time)
+                * track.misses,
+            )
+            for track in self._state.tracks
+        ]
+
+    def _track_detection(self, track, previous, frame, pair, clusters, prediction, free):
+        """The points of ``previous`` that are ``track``'s, and their motion, or None.
+
+        ``clusters`` are the pair's moving clusters that cover its prediction. The
+        track's motion is refined from its prediction (and the clusters' motions) on
+        the points no other track holds near the prediction (``free``) and the
+        clusters' (see :func:`mmreg.tracking._evidence.track_claim`); it claims the
+        points it alone explains, and those of its own shape it explains too.
+        """
+        dt = frame.time - previous.time
+        first = previous.returns
+        points, radius = prediction
+        centre = transform(previous.pose, points).mean(axis=0)
+        own = (
+            np.concatenate([rows for rows, _ in clusters])
+            if clusters
+            else np.zeros(0, dtype=np.intp)
+        )
+        near = np.union1d(near_points(first, points, radius, np.flatnonzero(free)), own)
+        tight = np.union1d(near_points(first, points, _TIGHT * self.tau, near), own)
+        # The prediction, the same twist slower or faster (a car brakes at a light,
+        # pulls away), and the clusters' own motions: each a start for the track's ICP.
+        starts = [
+            compose(
+                inverse(frame.pose),
+                predicted_motion(track.omega, track.velocity, centre, dt * speed),
+                previous.pose,
+            )
+            for speed in _SPEEDS
+        ] + [motion for _, motion in clusters]
+        min_points = self._min_points()
+        # A confirmed track needs less new evidence: its past shows it moves.
+        claim = track_claim(
+            first,
+            near,
+            tight,
+            starts,
+            pair.ego,
+            frame.target(),
+            pair.scale,
+            max_distance=0.2 * self.tau,
+            min_evidence=min_points // 2 if track.confirmed else min_points,
+            up=previous.up,
+        )
+        if claim is not None:
+            rows, motion = np.union1d(claim.rows, own), claim.motion
+        elif clusters and track.confirmed:
+            rows, motion = own, max(clusters, key=lambda c: len(c[0]))[1]
+        else:
+            return None
+        # A track takes a detection only where its motion follows the track's.
+        world = compose(frame.pose, motion, inverse(previous.pose))
+        _, velocity = twist_of(world, transform(previous.pose, first[rows]).mean(axis=0), dt)
+        if not consistent_motion(track, velocity, dt, _MOTION_TOLERANCE * self.tau):
+            return None
+        return rows, motion
+
+    def _observe(self, track, previous, frame, rows, motion, dt):
+        """``track`` seen at ``rows`` of ``previous``, moving by ``motion`` to ``frame``."""
+        world = compose(frame.pose, motion, inverse(previous.pose))
+        points = transform(previous.pose, previous.returns[rows])
+        track.update(_sample(points, self._state.rng), previous.time, previous.index, world, dt)
+        previous.track_of[rows] = track.key
+        previous.motions[track.key] = motion
+
+    def _born(self, previous, frame, rows, motion, dt):
+        """A tentative track for a moving cluster no track holds.
+
+        In z-up sweeps its motion is fitted again, level (a turn about the vertical and
+        a shift, :mod:`mmreg.tracking._level_icp`), from the cluster's: a far car's few
+        points fit a free motion that tilts it by tens of degrees.
+        """
+        state = self._state
+        first = previous.returns
+        if previous.up is not None:
+            level = level_part(motion, previous.ego, first[rows].mean(axis=0), previous.up)
+            motion = level_icp(
+                first[rows],
+                level,
+                previous.ego,
+                frame.target(),
+                max_distance=0.2 * self.tau,
+                up=previous.up,
+            )
+        world = compose(frame.pose, motion, inverse(previous.pose))
+        points = transform(previous.pose, previous.returns[rows])
+        omega, velocity = twist_of(world, points.mean(axis=0), dt)
+        track = Track(
+            key=state.next_key,
+            points=_sample(points, state.rng),
+            time=previous.time,
+            frame=previous.index,
+            omega=omega,
+            velocity=velocity,
+        )
+        state.next_key += 1
+        state.tracks.append(track)
+        previous.track_of[rows] = track.key
+        previous.motions[track.key] = motion
+        return track
+
+    def _confirm_and_end(self, previous, seen):
+        """Confirm the tentative tracks seen twice; coast the others, ending those that
+        missed too many frames (a tentative one at its first miss)."""
+        state = self._state
+        alive = []
+        for track in state.tracks:
+            if track.key in seen:
+                if not track.confirmed and track.hits >= 2:
+                    state.n_confirmed += 1
+                    track.identity = state.n_confirmed
+                    state.identity[track.key] = track.identity
+                previous.rows.append(_row(track, previous, seen[track.key]))
+            else:
+                track.coast(previous.time, previous.index)
+                if track.misses > (self.max_misses if track.confirmed else 0):
+                    continue
+            alive.append(track)
+        state.tracks = alive
+
+    def _min_points(self):
+        estimator = self.pair_estimator
+        if estimator is not None:
+            value = estimator.get_params(deep=False).get("min_island_size")
+            if isinstance(value, Integral):
+                return int(value)
+        return 12
+
+    # ------------------------------------------------------------------ results
+    def _result(self, frame):
+        identity = self._state.identity
+        n = len(frame.points)
+        labels = np.full(n, -1, dtype=np.intp)
+        valid_labels = np.where(frame.pair_labels >= 0, 0, -1)
+        keys = frame.track_of
+        ids = (
+            np.array([identity.get(int(k), 0) for k in keys], dtype=np.intp) if len(keys) else keys
+        )
+        valid_labels = np.where(ids > 0, ids, valid_labels)
+        valid_labels[frame.body] = -1
+        labels[frame.valid] = valid_labels
+        moving = labels > 0
+        flow = np.full((n, 3), np.nan)
+        valid_flow = frame.pair_flow.copy()
+        first = frame.returns
+        for key, motion in frame.motions.items():
+            rows = keys == key
+            if identity.get(key, 0) > 0:
+                valid_flow[rows] = transform(motion, first[rows]) - first[rows]
+            else:  # a ghost moves with the static world
+                valid_flow[rows] = transform(frame.ego, first[rows]) - first[rows]
+        flow[frame.valid] = valid_flow
+        rows = [r for r in frame.rows if identity.get(r["key"], 0) > 0]
+        for r in rows:
+            r["track"] = identity[r["key"]]
+        return Bunch(
+            index=frame.index,
+            time=frame.time,
+            labels=labels,
+            moving=moving,
+            flow=flow,
+            pose=frame.pose,
+            tracks=self._table(rows),
+        )
+
+    def _last_result(self, frame):
+        """The last frame: the confirmed tracks' points of the frame before, moved on."""
+        state = self._state
+        n = len(frame.points)
+        labels = np.full(n, -1, dtype=np.intp)
+        valid_labels = np.zeros(int(frame.valid.sum()), dtype=np.intp)
+        before = state.last_first
+        points = frame.returns
+        if before is not None and before.track_of is not None:
+            for key, motion in before.motions.items():
+                identity = state.identity.get(key, 0)
+                if identity <= 0:
+                    continue
+                moved = transform(motion, before.returns[before.track_of == key])
+                near = near_points(points, moved, _NEAR * self.tau * 0.5)
+                valid_labels[near] = identity
+        if frame.body is not None:
+            valid_labels[frame.body] = -1
+        labels[frame.valid] = valid_labels
+        return Bunch(
+            index=frame.index,
+            time=frame.time,
+            labels=labels,
+            moving=labels > 0,
+            flow=np.full((n, 3), np.nan),
+            pose=frame.pose,
+            tracks=self._table([]),
+        )
+
+    @staticmethod
+    def _table(rows):
+        columns = [
+            "track", "frame", "time", "x", "y", "z", "length", "width", "height", "yaw",
+            "vx", "vy", "vz", "speed", "yaw_rate", "points",
+        ]  # fmt: skip
+        rows = list(rows)
+        table = pd.DataFrame([{c: r[c] for c in columns} for r in rows], columns=columns)
+        return table.sort_values(["track", "frame"], ignore_index=True)
+
+
+@dataclass
+class _LogState:
+    rng: np.random.RandomState
+    tracks: list = field(default_factory=list)
+    identity: dict = field(default_factory=dict)
+    pending: list = field(default_factory=list)
+    previous: _Frame | None = None
+    last_ego: tuple | None = None
+    n_frames: int = 0
+    next_key: int = 0
+    n_confirmed: int = 0
+
+    last_first: _Frame | None = None  # the last frame that was a pair's first sweep
+
+
+@dataclass
+class _Pair:
+    """What a step needs of the pair's fit."""
+
+    ego: np.ndarray  # 4 x 4, first sweep to second
+    scale: float  # the ego ICP's robust residual scale
+    ground: np.ndarray  # the first sweep's ground (valid rows)
+    detections: dict  # moving cluster -> (rows, 4 x 4 motion)
+
+
+def _mask(values, n):
+    return np.zeros(n, dtype=bool) if values is None else np.asarray(values, dtype=bool)
+
+
+def _sample(points, rng):
+    if len(points) <= _TRACK_POINTS:
+        return points
+    return points[rng.choice(len(points), _TRACK_POINTS, replace=False)]
+
+
+def _row(track, frame, n_points):
+    points = track.points
+    centre = points.mean(axis=0)
+    length, width, height, yaw = _box(points)
+    return {
+        "key": track.key,
+        "frame": frame.index,
+        "time": frame.time,
+        "x": centre[0],
+        "y": centre[1],
+        "z": centre[2],
+        "length": length,
+        "width": width,
+        "height": height,
+        "yaw": yaw,
+        "vx": track.velocity[0],
+        "vy": track.velocity[1],
+        "vz": track.velocity[2],
+        "speed": float(np.linalg.norm(track.velocity)),
+        "yaw_rate": float(track.omega[2]),
+        "points": n_points,
+    }

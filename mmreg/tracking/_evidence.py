@@ -1,0 +1,187 @@
+"""A track's predicted motion, tested point by point against the static world's.
+
+A pair of sweeps alone misses many moving objects: most of their points sit in the
+static cluster (a car the islands' search did not start near, a walker whose island a
+wall holds). A track knows where such an object should be and how it should move. Its
+evidence in a pair is the set of points near where it should be that its motion
+explains on the second sweep and the ego motion does not (the same "explained" rule the
+slow movers use, :mod:`mmreg.sweeps._explained`). A parked car gives none: the ego motion
+explains it.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_mask
+from mmreg.sweeps._icp import multi_body_icp
+from mmreg.tracking._level_icp import level_icp, level_part
+from mmreg.tracking._motion import transform
+
+# Evidence must exceed this many times the counter-evidence.
+_AGAINST = 2
+
+__all__ = ["Claim", "claimed_points", "near_points", "track_claim"]
+
+
+def near_points(points, where, radius, candidates=None):
+    """Indices of ``points`` within ``radius`` of any of ``where`` (among ``candidates``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.tracking._evidence import near_points
+    >>> points = np.array([[0.0, 0, 0], [1.0, 0, 0], [5.0, 0, 0]])
+    >>> near_points(points, np.array([[0.9, 0.0, 0.0]]), 0.5).tolist()
+    [1]
+    """
+    if candidates is None:
+        candidates = np.arange(len(points))
+    if not len(where) or not len(candidates):
+        return np.zeros(0, dtype=np.intp)
+    low, high = where.min(axis=0) - radius, where.max(axis=0) + radius
+    box = candidates[np.all((points[candidates] >= low) & (points[candidates] <= high), axis=1)]
+    if not len(box):
+        return box
+    distance, _ = cKDTree(where).query(points[box], distance_upper_bound=radius)
+    return box[np.isfinite(distance)]
+
+
+def claimed_points(points, motion, ego, target, scale):
+    """Which ``points`` ``motion`` explains on the second sweep and ``ego`` does not.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+        Points of the first sweep, in its frame.
+    motion, ego : ndarray of shape (4, 4)
+        The track's motion and the ego motion, first sweep to second.
+    target : tuple
+        ``(sweep, tree, normals)``: the second sweep, its cKDTree and SurfaceNormals.
+    scale : float
+        The ego ICP's robust point-to-plane residual scale.
+
+    Returns
+    -------
+    claimed : ndarray of shape (n,), bool
+
+    Examples
+    --------
+    A floor and a box's face on it, the face moved 1 m along x between the sweeps. At rest,
+    its bottom row lies on the floor, which explains it; the nine rows above are claimed.
+
+    >>> import numpy as np
+    >>> from scipy.spatial import cKDTree
+    >>> from mmreg.sweeps._icp import SurfaceNormals
+    >>> from mmreg.tracking._evidence import claimed_points
+    >>> from mmreg.tracking._motion import to_matrix
+    >>> g = np.arange(-3.0, 3.0, 0.1)
+    >>> floor = np.stack(np.meshgrid(g, g, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    >>> h = np.arange(0.05, 1.0, 0.1)
+    >>> face = np.stack(np.meshgrid([0.0], h - 0.5, h, indexing="ij"), -1).reshape(-1, 3)
+    >>> sweep = np.vstack([floor, face + [1.0, 0.0, 0.0]])
+    >>> tree = cKDTree(sweep)
+    >>> target = (sweep, tree, SurfaceNormals(sweep, tree, 10))
+    >>> moved = to_matrix(np.eye(3), [1.0, 0.0, 0.0])
+    >>> claimed = claimed_points(np.vstack([face, floor[:5]]), moved, np.eye(4), target, 0.01)
+    >>> int(claimed[: len(face)].sum()), int(claimed[len(face) :].sum())
+    (90, 0)
+    """
+    sweep, tree, normals = target
+    at_rest, _ = unexplained_mask(transform(ego, points), tree, sweep, normals, scale)
+    ratio, _, _ = spacing_ratio(transform(motion, points), tree, sweep, normals)
+    return at_rest & (ratio <= EXPLAINED_SPACINGS)
+
+
+@dataclass
+class Claim:
+    """What a track's motion claims in a pair (see :func:`track_claim`)."""
+
+    rows: np.ndarray  # the points it claims: its evidence and the points consistent with it
+    evidence: int  # how many more of them only its motion explains than only the ego's
+    motion: np.ndarray  # 4 x 4, refined on them
+
+
+def track_claim(
+    points, near, tight, starts, ego, target, scale, *, max_distance, min_evidence, up=None
+):
+    """The points a track's motion claims in a pair, and the motion refined on them.
+
+    ``near`` index the points of ``points`` near where the track should be, ``tight``
+    (a subset) those within its own points' reach; ``starts`` are 4 x 4 motions to try
+    (the prediction, and the same twist slower or faster: a car brakes). From each
+    start, the evidence is the points of ``near`` that the motion explains on the second
+    sweep and the ego motion does not; the motion is refined by a point-to-plane ICP
+    (Tukey's kernel) on them and on the points of ``tight`` it explains (a car's side
+    that slides along itself is no evidence, but it is the car's). The refined motion
+    with the most evidence wins, if it has ``min_evidence`` points and moves them more
+    than two of the second sweep's spacings from where the ego motion puts them (a car
+    that stopped does not). ``up``: the vertical of z-up sweeps, along which a road
+    user's motion is kept level (:mod:`mmreg.tracking._level_icp`); None: free.
+    Returns a :class:`Claim` or None.
+    """
+    if len(near) < min_evidence:
+        return None
+    sweep, tree, normals = target
+    seeds, motions = [], []
+    for start in starts:
+        evidence = near[claimed_points(points[near], start, ego, target, scale)]
+        if len(evidence) < min_evidence:
+            continue
+        ratio, _, _ = spacing_ratio(transform(start, points[tight]), tree, sweep, normals)
+        seeds.append(np.union1d(evidence, tight[ratio <= EXPLAINED_SPACINGS]))
+        motions.append(start)
+    if not seeds:
+        return None
+    if up is not None:  # road users: a turn about the vertical and a shift
+        refined_motions = [
+            level_icp(
+                points[rows],
+                level_part(start, ego, points[rows].mean(axis=0), up),
+                ego,
+                target,
+                max_distance=max_distance,
+                up=up,
+            )
+            for rows, start in zip(seeds, motions, strict=True)
+        ]
+    else:
+        rows = np.concatenate(seeds)
+        group = np.repeat(np.arange(len(seeds)), [len(s) for s in seeds])
+        result = multi_body_icp(
+            points[rows],
+            group,
+            np.stack([m[:3, :3] for m in motions]),
+            np.stack([m[:3, 3] for m in motions]),
+            sweep,
+            tree=tree,
+            normals=normals,
+            max_distance=max_distance,
+            max_iter=15,
+            tol=1e-4 * max_distance,
+        )
+        refined_motions = []
+        for k in range(len(seeds)):
+            refined = np.eye(4)
+            refined[:3, :3], refined[:3, 3] = result.rotations[k], result.translations[k]
+            refined_motions.append(refined)
+    best = None
+    for refined in refined_motions:
+        evidence = near[claimed_points(points[near], refined, ego, target, scale)]
+        # Noise leaves a few points of a still object unexplained at rest, which a
+        # small motion explains: as many as that motion leaves unexplained that the
+        # ego motion explains. A moving object's evidence outweighs its counter-evidence.
+        against = np.count_nonzero(claimed_points(points[near], ego, refined, target, scale))
+        score = len(evidence) - _AGAINST * against
+        if score < min_evidence or (best is not None and score <= best.evidence):
+            continue
+        moved = transform(refined, points[evidence])
+        _, _, spacing = spacing_ratio(moved, tree, sweep, normals)
+        departure = np.linalg.norm(moved - transform(ego, points[evidence]), axis=1)
+        if np.median(departure) <= EXPLAINED_SPACINGS * np.median(spacing):
+            continue
+        ratio, _, _ = spacing_ratio(transform(refined, points[tight]), tree, sweep, normals)
+        rows = np.union1d(evidence, tight[ratio <= EXPLAINED_SPACINGS])
+        best = Claim(rows, score, refined)
+    return best
