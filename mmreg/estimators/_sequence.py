@@ -33,6 +33,7 @@ from mmreg.tracking._motion import (
     twist_of,
 )
 from mmreg.tracking._tracks import Track, consistent_motion, overlap_matrix
+from mmreg.tracking._visibility import RangeView
 
 __all__ = ["SequenceRegistration"]
 
@@ -54,6 +55,8 @@ _MIN_OVERLAP = 0.3
 _MOTION_TOLERANCE = 0.04
 # The prediction's twist is tried at these shares of its speed.
 _SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
+# A place is hidden from a sweep behind a return this much nearer (share of tau).
+_HIDDEN = 0.05
 # Points kept per track (its shape for the prediction and the association).
 _TRACK_POINTS = 2000
 
@@ -69,6 +72,7 @@ class _Frame:
     pose: np.ndarray | None = None  # estimated sensor pose (world from sensor)
     given_pose: np.ndarray | None = None
     _target: tuple | None = None
+    _view: object | None = None
     # Set by the pair of which this frame is the first sweep:
     pair_labels: np.ndarray | None = None  # the pair's labels of the valid rows
     pair_flow: np.ndarray | None = None
@@ -82,6 +86,12 @@ class _Frame:
     @property
     def returns(self):
         return self.points[self.valid]
+
+    def view(self):
+        """The range image of the valid rows, built once."""
+        if self._view is None:
+            self._view = RangeView(self.returns)
+        return self._view
 
     def target(self):
         """``(points, tree, normals)`` of the valid rows, built once."""
@@ -509,6 +519,8 @@ class SequenceRegistration(BaseEstimator):
             max_distance=0.2 * self.tau,
             min_evidence=min_points // 2 if track.confirmed else min_points,
             up=previous.up,
+            view=frame.view(),
+            margin=_HIDDEN * self.tau,
         )
         if claim is not None:
             rows, motion = np.union1d(claim.rows, own), claim.motion

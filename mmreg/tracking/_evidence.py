@@ -48,7 +48,7 @@ def near_points(points, where, radius, candidates=None):
     return box[np.isfinite(distance)]
 
 
-def claimed_points(points, motion, ego, target, scale):
+def claimed_points(points, motion, ego, target, scale, view=None, margin=0.0):
     """Which ``points`` ``motion`` explains on the second sweep and ``ego`` does not.
 
     Parameters
@@ -61,6 +61,11 @@ def claimed_points(points, motion, ego, target, scale):
         ``(sweep, tree, normals)``: the second sweep, its cKDTree and SurfaceNormals.
     scale : float
         The ego ICP's robust point-to-plane residual scale.
+    view : RangeView or None
+        The second sweep's range image (:mod:`mmreg.tracking._visibility`): a point that
+        ``ego`` puts where the second sweep could not see (a return more than ``margin``
+        nearer in its direction) is no evidence.
+    margin : float
 
     Returns
     -------
@@ -89,9 +94,18 @@ def claimed_points(points, motion, ego, target, scale):
     (90, 0)
     """
     sweep, tree, normals = target
-    at_rest, _ = unexplained_mask(transform(ego, points), tree, sweep, normals, scale)
-    ratio, _, _ = spacing_ratio(transform(motion, points), tree, sweep, normals)
-    return at_rest & (ratio <= EXPLAINED_SPACINGS)
+    rest, moved = transform(ego, points), transform(motion, points)
+    at_rest, _ = unexplained_mask(rest, tree, sweep, normals, scale)
+    ratio, _, _ = spacing_ratio(moved, tree, sweep, normals)
+    claimed = at_rest & (ratio <= EXPLAINED_SPACINGS)
+    if view is not None and claimed.any():
+        # Hidden, unless what hides it is the point itself where the motion puts it (a
+        # car coming closer hides the place it left).
+        occluder = view.nearest_return(rest[claimed])
+        hidden = occluder < np.linalg.norm(rest[claimed], axis=1) - margin
+        itself = np.abs(occluder - np.linalg.norm(moved[claimed], axis=1)) <= margin
+        claimed[claimed] = ~hidden | itself
+    return claimed
 
 
 @dataclass
@@ -104,7 +118,19 @@ class Claim:
 
 
 def track_claim(
-    points, near, tight, starts, ego, target, scale, *, max_distance, min_evidence, up=None
+    points,
+    near,
+    tight,
+    starts,
+    ego,
+    target,
+    scale,
+    *,
+    max_distance,
+    min_evidence,
+    up=None,
+    view=None,
+    margin=0.0,
 ):
     """The points a track's motion claims in a pair, and the motion refined on them.
 
@@ -119,14 +145,16 @@ def track_claim(
     than two of the second sweep's spacings from where the ego motion puts them (a car
     that stopped does not). ``up``: the vertical of z-up sweeps, along which a road
     user's motion is kept level (:mod:`mmreg.tracking._level_icp`); None: free.
-    Returns a :class:`Claim` or None.
+    ``view`` and ``margin``: the second sweep's range image; points it could not have
+    seen are no evidence either way (see :func:`claimed_points`). Returns a
+    :class:`Claim` or None.
     """
     if len(near) < min_evidence:
         return None
     sweep, tree, normals = target
     seeds, motions = [], []
     for start in starts:
-        evidence = near[claimed_points(points[near], start, ego, target, scale)]
+        evidence = near[claimed_points(points[near], start, ego, target, scale, view, margin)]
         if len(evidence) < min_evidence:
             continue
         ratio, _, _ = spacing_ratio(transform(start, points[tight]), tree, sweep, normals)
@@ -168,11 +196,13 @@ def track_claim(
             refined_motions.append(refined)
     best = None
     for refined in refined_motions:
-        evidence = near[claimed_points(points[near], refined, ego, target, scale)]
+        evidence = near[claimed_points(points[near], refined, ego, target, scale, view, margin)]
         # Noise leaves a few points of a still object unexplained at rest, which a
         # small motion explains: as many as that motion leaves unexplained that the
         # ego motion explains. A moving object's evidence outweighs its counter-evidence.
-        against = np.count_nonzero(claimed_points(points[near], ego, refined, target, scale))
+        against = np.count_nonzero(
+            claimed_points(points[near], ego, refined, target, scale, view, margin)
+        )
         score = len(evidence) - _AGAINST * against
         if score < min_evidence or (best is not None and score <= best.evidence):
             continue
