@@ -464,6 +464,8 @@ class SequenceSweepPairJob:
         )
         data["indices"] = np.flatnonzero(valid)[data["indices"]]
         data["sweep_points"] = first.points
+        if not timed and first.timestamp is not None and second.timestamp is not None:
+            data["interval"] = second.timestamp - first.timestamp  # bounds the motions
         return data | {"pairs": "sweeps"}
 
 
