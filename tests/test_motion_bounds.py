@@ -215,3 +215,18 @@ def test_interval_alone_is_checked():
         SweepRegistration().fit(a, sweep=sweep, interval=-0.1)
     with pytest.raises(TypeError, match="number of seconds"):
         SweepRegistration().fit(a, sweep=sweep, interval="0.1")
+
+
+def test_a_runs_sequence_without_capture_times_hands_its_stamps_interval_to_fit(tmp_path):
+    pytest.importorskip("rosbags")
+    from test_sequences import write_bag
+
+    from mmreg.runner import _process, dataset_jobs, default_sweep_estimator
+
+    scene = make_lidar_sweeps(n_moving=1, n_parked=1, n_azimuths=256, random_state=3)
+    bag = write_bag(tmp_path / "drive", [scene.a, scene.sweep])  # stamps 0.1 s apart
+    (job,) = dataset_jobs(bag)
+    assert job.load()["interval"] == pytest.approx(0.1)
+    _, arrays, row = _process(job, default_sweep_estimator())
+    assert row["status"] == "done" and not row["capture_times"]
+    assert row["interval"] == pytest.approx(0.1)

@@ -101,8 +101,14 @@ def test_register_counts_draws_and_keeps_the_body_apart(tmp_path, sweeps, capsys
     assert run["n_outliers"] == int(np.sum((labels < 0) & ~flagged))
     assert f"{run['n_outliers']:,} outlier" in printed
     assert f"{int(flagged.sum()):,} on the ego vehicle's body" in printed
-    # 'mmreg view' draws it apart again.
+    # 'mmreg view' draws it apart again; 'mmreg evaluate' counts it apart.
     assert main(["view", str(out), "--out", str(tmp_path / "again.png")]) == 0
+    np.save(tmp_path / "truth.npy", np.maximum(labels, 0))
+    capsys.readouterr()
+    assert main(["evaluate", str(out), str(tmp_path / "truth.npy"), "--json"]) == 0
+    scores = json.loads(capsys.readouterr().out)
+    assert scores["ego_body"] == flagged.sum()
+    assert scores["outliers_predicted"] == run["n_outliers"]
 
 
 def test_the_picture_draws_the_body_apart_from_the_outliers(sweeps):

@@ -434,6 +434,7 @@ def _process(job, estimator, pictures=False):
         elif sweep is not None and data.get("interval") and "interval" in _named(model):
             params["interval"] = data["interval"]  # alone: it bounds the objects' motions
         row["capture_times"] = timed
+        row["interval"] = float(params.get("interval", math.nan))
         if row["ground"] == "masks":
             params.update({key: data[key] for key in _GROUND})
         start = time.perf_counter()
@@ -742,10 +743,12 @@ def run_dataset(
         scene_flow_metrics`), ``epe_static`` and ``epe_moving`` (the mean EPE on the
         largest object's points and on the others'). Points with a negative true label
         are not scored. ``capture_times``: whether ``fit`` was given the points' capture
-        times; ``ground``: whether the map's ground masks were handed to ``fit``
+        times; ``interval``: the seconds between the sweeps given to ``fit`` (with the
+        times, or alone: a sequence's stamps, which bound the objects' motions), else
+        NaN; ``ground``: whether the map's ground masks were handed to ``fit``
         (``"masks"``), the ground rows dropped (``"dropped"``: ``ground="drop"``, or
-        ``"auto"`` with a ``fit`` that takes no masks) or kept (``"kept"``); ``pairs``: what it was
-        fitted on (``"sweeps"``, ``"flow"``, ``"truth"``, ``"correspondences"``) and
+        ``"auto"`` with a ``fit`` that takes no masks) or kept (``"kept"``); ``pairs``:
+        what it was fitted on (``"sweeps"``, ``"flow"``, ``"truth"``, ``"correspondences"``) and
         ``truth_fed``: whether that was the ground-truth flow; ``n_file``: rows of the
         first sweep's file.
 
