@@ -1609,7 +1609,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                     # "auto" stands for an unknown interval, searched twice as far.
                     reach=self.max_displacement_
                     * (2.0**_WIDENINGS if self.max_displacement == "auto" else 1.0),
-                    interval=self.interval_,
+                    interval=getattr(self, "interval_", None),
                     up=np.eye(3)[2] if is_z_up_sweep(a if whole is None else whole[0]) else None,
                 )
             )
