@@ -238,6 +238,15 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
         return
     if incoherence <= NEIGHBOUR_SPACINGS * float(np.median(spacing)):
         return
+    if radius == 0:  # no scene to measure the flows against: one point sent everywhere
+        shared = int(np.count_nonzero(np.all(a == np.median(a, axis=0), axis=1)))
+        raise NotCorrespondencesError(
+            f"X does not look like correspondences: {shared} of its {len(a)} rows share one "
+            f"a-point ({', '.join(f'{v:g}' for v in np.median(a, axis=0))}) while their "
+            f"b-points differ (the flows b - a of nearest a-points differ by {incoherence:.3g}, "
+            "median): one point cannot move to several places. Each row must pair a "
+            "distinct point with where it went; remove the repeated rows."
+        )
     raise NotCorrespondencesError(
         "X does not look like correspondences: the flows b - a of nearest a-points differ "
         f"by {incoherence:.3g} (median), "

@@ -267,7 +267,6 @@ def _write(folder, name, values):
     [
         (["--times", "T"], "go together .* missing --sweep-times and --interval"),
         (["--times", "T", "--sweep-times", "S"], "missing --interval"),
-        (["--interval", "0.1"], "missing --times and --sweep-times"),
         (["--times", "SHORT", "--sweep-times", "S", "--interval", "0.1"], "5 capture times"),
         (["--times", "T", "--sweep-times", "T", "--interval", "0.1"], "capture times for the"),
         (["--times", "NAN", "--sweep-times", "S", "--interval", "0.1"], "NaN or infinity"),

@@ -49,7 +49,8 @@ def test_ground_in_run_means_what_it_means_in_register(tmp_path, scheduler, grou
     out = tmp_path / "out"
     command = ["run", str(sequence), "--out", str(out), "--scheduler", scheduler, "-q"]
     assert main([*command, "--ground", ground]) == 0
-    expected = sweep_estimator(ground=ground).fit(a, sweep=sweep)
+    # The frames' times (times.txt, 0.1 s apart) bound the objects' motions.
+    expected = sweep_estimator(ground=ground).fit(a, sweep=sweep, interval=0.1)
     arrays, row = read_job_result(out / "jobs" / "000000.npz")
     np.testing.assert_array_equal(arrays["labels"], expected.labels_)
     # The summary says what was done with the ground Patchwork++ found.

@@ -43,8 +43,9 @@ RESULT_FILES = (
     "X.npy",
     "run.json",
 )
-# Files a result directory may also hold (``mmreg demo --out`` adds the ground truth).
-EXTRA_RESULT_FILES = ("truth.npz",)
+# Files a result directory may also hold (``mmreg demo --out`` adds the ground truth; two
+# sweeps, the ego vehicle's body and the rows of INPUT kept when some held no return).
+EXTRA_RESULT_FILES = ("truth.npz", "ego_body.npy", "indices.npy")
 # Staging folders (and replaced results) of this process, removed if it is interrupted.
 _PARTIAL = set()
 
@@ -59,6 +60,8 @@ SUMMARY_COLUMNS = [
     "ty",
     "tz",
     "translation_norm",
+    "displacement",
+    "speed",
     "sigma",
     "rms_residual",
     "centroid_x",
@@ -251,6 +254,89 @@ def check_correspondences(X, path):
     return X
 
 
+class NoReturns:
+    """The rows of two sweeps that hold a return, and how many did not.
+
+    A row with NaN, or one of several at the origin (a LiDAR driver's failed returns: a
+    bag with ``is_dense`` false, an organised cloud, a KITTI scan;
+    :func:`mmreg._validation.invalid_rows`), is no measurement. ``keep`` and
+    ``keep_sweep`` flag the rows kept of INPUT (points or correspondences) and of the
+    second sweep; ``n`` and ``n_sweep`` count those dropped.
+    """
+
+    def __init__(self, X, sweep):
+        import numpy as np
+
+        from mmreg._validation import invalid_rows
+
+        def no_return(values):
+            values = np.asarray(values, dtype=float)
+            return invalid_rows(values if values.shape[1] % 2 == 0 else np.hstack([values] * 2))
+
+        self.keep = ~no_return(X)
+        self.keep_sweep = ~no_return(sweep)
+        self.n = int(np.count_nonzero(~self.keep))
+        self.n_sweep = int(np.count_nonzero(~self.keep_sweep))
+
+    def apply(self, X, sweep, timing, input_name, sweep_name):
+        """``X``, ``sweep`` and the capture times (``fit``'s keywords) on the kept rows.
+
+        A CLIError when a sweep keeps too few rows to register.
+        """
+        pairs = ((self.keep, X, input_name), (self.keep_sweep, sweep, sweep_name))
+        for kept, values, name in pairs:
+            if int(kept.sum()) < 3:
+                raise CLIError(
+                    f"{name}: {int(kept.sum())} of its {len(values):,} rows hold a return (the "
+                    "others are NaN or at the origin); too few to register"
+                )
+        timing = dict(timing or {})
+        if timing.get("times") is not None:
+            timing["times"] = timing["times"][self.keep]
+        if timing.get("sweep_times") is not None:
+            timing["sweep_times"] = timing["sweep_times"][self.keep_sweep]
+        return X[self.keep], sweep[self.keep_sweep], timing
+
+    def record(self):
+        """What ``run.json`` keeps: the counts."""
+        return {"n_no_return": self.n, "n_sweep_no_return": self.n_sweep}
+
+
+def ego_body(estimator, n):
+    """Which of the ``n`` rows a fit took for the ego vehicle's own body (none if it has no
+    such attribute): labelled -1, but no outliers."""
+    import numpy as np
+
+    body = getattr(estimator, "ego_body_mask_", None)
+    return np.zeros(n, dtype=bool) if body is None else np.asarray(body, dtype=bool)
+
+
+def count_line(estimator, n, no_returns=None):
+    """``"12 outliers, 300 on the ego vehicle's body, 5 rows without a return left out"``:
+    the points of a fit that no cluster holds, each kind apart (the last two when any)."""
+    body = ego_body(estimator, n)
+    parts = [plural(int(estimator.outlier_mask_.sum()) - int(body.sum()), "outlier")]
+    if body.any():
+        parts.append(f"{int(body.sum()):,} on the ego vehicle's body")
+    if no_returns is not None and no_returns.n + no_returns.n_sweep:
+        parts.append(
+            f"{no_returns.n:,} + {no_returns.n_sweep:,} rows without a return left out "
+            "(first + second sweep)"
+        )
+    return ", ".join(parts)
+
+
+def npy_bytes(array):
+    """The bytes of ``array`` as an ``.npy`` file."""
+    import io
+
+    import numpy as np
+
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    return buffer.getvalue()
+
+
 def check_labels(labels, n, path, what="labels"):
     """Integer labels, one per correspondence, or a CLIError on ``path``."""
     import numpy as np
@@ -318,7 +404,9 @@ def sweep_residuals(a, flow, sweep, workers=1):
     return residual
 
 
-def summarize(X, labels, rotations, translations, sigmas=None, *, residuals=None, moving=None):
+def summarize(
+    X, labels, rotations, translations, sigmas=None, *, residuals=None, moving=None, interval=None
+):
     """One row per cluster: size, motion, residual and motion relative to the background.
 
     The background is the largest cluster. ``displacement_vs_background`` is the median
@@ -329,6 +417,12 @@ def summarize(X, labels, rotations, translations, sigmas=None, *, residuals=None
     correspondences. A cluster is ``moving`` when the displacement exceeds
     :data:`mmreg._array.motion.MOVING_FACTOR` (3) times the residual scale
     (:func:`mmreg._array.motion.moving_clusters`).
+
+    ``translation_norm`` is ``|t|``, the motion of the sensor's origin under the cluster's
+    motion (with a moving sensor, not how far the cluster went): ``displacement`` is the
+    object's own, how far its motion takes its centroid beyond where the background's
+    motion takes it, and ``speed`` that over ``interval`` (seconds between the two
+    frames; NaN when unknown).
 
     ``residuals`` (one per row) replace ``|R a + t - b|`` in the two residual columns:
     for two sweeps, where ``b = a + flow`` is the result's own (:func:`sweep_residuals`).
@@ -367,6 +461,15 @@ def summarize(X, labels, rotations, translations, sigmas=None, *, residuals=None
     frame["rotation_angle_deg"] = angles
     frame[["tx", "ty", "tz"]] = translations
     frame["translation_norm"] = np.linalg.norm(translations, axis=1)
+    if static >= 0:
+        from mmreg.sweeps._motion_bounds import object_motions
+
+        own, _ = object_motions(a, labels, (rotations, translations), static)
+        own[static] = 0.0  # the reference, exactly
+        frame["displacement"] = np.nan_to_num(np.linalg.norm(own, axis=1), nan=0.0)
+    else:
+        frame["displacement"] = np.full(n_clusters, np.nan)
+    frame["speed"] = frame["displacement"] / interval if interval else np.nan
     frame["sigma"] = (
         np.asarray(sigmas, dtype=float) if sigmas is not None else np.full(n_clusters, np.nan)
     )
@@ -458,6 +561,7 @@ def result_figure(
     frame="auto",
     interval=None,
     range_=None,
+    ego_body=None,
 ):
     """The picture of a result: :func:`mmreg.plotting.plot_result` of its a-points."""
     from mmreg.plotting import plot_result
@@ -473,6 +577,7 @@ def result_figure(
         interval=interval,
         range_=range_,
         title=title,
+        ego_body=ego_body,
     )
 
 

@@ -44,6 +44,7 @@ class Result:
     translations: Any = None
     moving: Any = None
     flow: Any = None
+    ego_body: Any = None
     camera: Any = None
     derived: bool = False
     external: bool = True
@@ -69,9 +70,30 @@ class Result:
         return self._cache["data"]
 
     def rows(self, array):
-        """The rows of a job's array (the sweep's points or truth) that the labels are."""
+        """The rows of the job's data (``X``, its truth) that the labels are.
+
+        The job's data holds the rows of its input that its load keeps (``indices``, e.g.
+        a sequence's returns), the result the rows its fit saw (its own ``indices``,
+        without the rows that hold no return or, with ``--ground drop``, the ground):
+        both name rows of the input, so the one is found in the other.
+        """
         indices = self._cache.get("indices")
-        return array if indices is None else array[indices]
+        if indices is None:
+            return array
+        import numpy as np
+
+        data = self.job_data()
+        loaded = data.get("indices") if data is not None else None
+        loaded = np.arange(len(array)) if loaded is None else np.asarray(loaded, dtype=np.intp)
+        order = np.argsort(loaded, kind="stable")
+        missing = indices[~np.isin(indices, loaded)]
+        if len(missing):
+            raise CLIError(
+                f"{self.path}: its rows include row {int(missing[0])} of the job's input, which "
+                f"the input no longer holds ({len(loaded):,} rows; changed since?)"
+            )
+        at = order[np.searchsorted(loaded, indices, sorter=order)]
+        return array[at]
 
 
 def _is_run_folder(path):
@@ -137,6 +159,10 @@ def _directory_result(folder):
         labels = mmio.read_labels(labels_path)
     labels = check_labels(labels, len(np.asarray(labels)), labels_path)
     result = Result(name=folder.name, path=folder, labels=labels)
+    body_path = folder / "ego_body.npy"
+    if body_path.exists():  # two sweeps: the ego vehicle's own body, labelled -1
+        with reading(body_path):
+            result.ego_body = _check_body(np.load(body_path, allow_pickle=False), labels, body_path)
     motions_path = folder / "motions.json"
     if motions_path.exists():
         with reading(motions_path):
@@ -186,6 +212,8 @@ def _job_result(path):
         moving=arrays.get("moving"),
         flow=np.asarray(arrays["flow"], dtype=float),
     )
+    if "ego_body" in arrays:
+        result.ego_body = _check_body(arrays["ego_body"], labels, path)
     if len(result.flow) != len(labels):
         raise CLIError(f"{path}: {len(result.flow)} flow vectors for {len(labels)} labels")
     if "indices" in arrays:
@@ -207,6 +235,19 @@ def _job_result(path):
     result.derived = configuration is not None and configuration.get("pairs") == "sweeps"
     result._points = lambda required: _job_points(result, required)
     return result
+
+
+def _check_body(body, labels, path):
+    """The ego vehicle's body: one bool per label, or a CLIError naming ``path``."""
+    import numpy as np
+
+    body = np.asarray(body)
+    if body.dtype != bool or body.shape != labels.shape:
+        raise CLIError(
+            f"{path}: the ego vehicle's body must be one bool per label ({len(labels):,}); got "
+            f"{body.dtype} {body.shape}"
+        )
+    return body
 
 
 def _load_job(job, result):
@@ -252,15 +293,7 @@ def _job_points(result, required):
     import numpy as np
 
     data = result.job_data()
-    X = np.asarray(data["X"], dtype=float)
-    indices = result._cache.get("indices")
-    if indices is not None:
-        if len(indices) and (indices.min() < 0 or indices.max() >= len(X)):
-            raise CLIError(
-                f"{result.path}: its indices go up to {indices.max()} but the job's input "
-                f"now has {len(X):,} rows (changed since?)"
-            )
-        X = X[indices]
+    X = result.rows(np.asarray(data["X"], dtype=float))
     if len(X) != len(result.labels):
         raise CLIError(
             f"{result.path}: {len(result.labels):,} labels but the job's input now has "

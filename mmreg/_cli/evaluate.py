@@ -303,7 +303,9 @@ def evaluate(result, truth):
     true_ids, true_sizes = np.unique(labels[labels >= 0], return_counts=True)
     # Every true object but the largest (the background; np.argmax: the first of ties).
     others = np.delete(true_ids, np.argmax(true_sizes)) if len(true_ids) else true_ids
-    flagged, outlying = pred < 0, labels < 0
+    # The ego vehicle's own body (labelled -1) is no predicted outlier: counted apart.
+    body = np.zeros(len(pred_all), bool) if result.ego_body is None else result.ego_body
+    flagged, outlying = (pred < 0) & ~body[keep], labels < 0
     hits = int(np.sum(flagged & outlying))
     scores = {
         "iou": iou_score(labels, pred) if len(labels) else math.nan,
@@ -323,6 +325,8 @@ def evaluate(result, truth):
         "clusters_predicted": int(len(np.unique(pred_all[pred_all >= 0]))),
         "objects_true": int(len(true_ids)),
     }
+    if body.any():
+        scores["ego_body"] = int(body[keep].sum())
     has_motions = result.rotations is not None
     X = _points(result, needed=has_motions or truth["flow"] is not None)
     if truth["flow"] is not None and X is not None:
@@ -362,6 +366,7 @@ _LINES = [
     ("objects_found_besides_background", "objects found besides background", ".0%"),
     ("outliers_predicted", "outliers predicted", ",d"),
     ("outliers_true", "outliers true", ",d"),
+    ("ego_body", "on the ego body", ",d"),
     ("outlier_precision", "outlier precision", ".0%"),
     ("outlier_recall", "outlier recall", ".0%"),
     ("clusters_predicted", "clusters predicted", "d"),

@@ -9,13 +9,17 @@ from pathlib import Path
 
 from mmreg._cli._common import (
     CLIError,
+    NoReturns,
     Steps,
     check_correspondences,
     check_labels,
     check_out,
+    count_line,
+    ego_body,
     format_table,
     input_record,
     load_npz,
+    npy_bytes,
     one_line,
     plural,
     reading,
@@ -90,6 +94,25 @@ nanoseconds or absolute timestamps). With them the moving clusters are deskewed 
 the ICP on S (SweepRegistration); the static world and the scene flow's convention (each
 point as captured, moved by its object's motion between the reference times) are as
 without.
+
+Motion bounds (two raw sweeps): an object's motion relative to the static world must be
+one a vehicle or a person can make. When the interval between the sweeps is known
+(--interval alone, capture times, or a sequence's timestamps), no faster than 50 m/s and
+no turn faster than 90 deg/s (360 deg/s for a cluster no longer than a person, 1.2 m
+across); else no farther than --max-displacement. Always: no level sheet sliding along
+itself (a sliver of terrain). A cluster that breaks a
+bound is taken apart: its points rejoin the static world where its motion explains them,
+else they are outliers. The lengths scale with --tau (5: metres). The table gives each
+object's own displacement relative to the static world (the "moved" column: its
+centroid's, not |t| about the sensor) and, with the interval, its speed.
+
+Rows without a return (NaN, or several all-zero rows: a bag with is_dense false, an
+organised .pcd, a KITTI scan) are left out of both sweeps with --sweep, counted in
+run.json (n_no_return, n_sweep_no_return) and the printed line; labels.npy, X.npy and
+clusters.ply hold the other rows, and indices.npy names the rows of INPUT they are.
+Returns from the ego vehicle's own body (near the sensor, fixed in its frame) are
+labelled -1 but are no outliers: counted apart (run.json's n_ego_body), flagged in
+ego_body.npy and drawn pale blue around the sensor.
 
 --init gives the initial clusters: "euclidean" (Euclidean clustering into --clusters
 clusters, the default; with two raw sweeps the default is SweepRegistration's own start,
@@ -352,7 +375,8 @@ def _add_sweep_options(parser):
         "--interval",
         type=_positive_float,
         metavar="SECONDS",
-        help="seconds between the two sweeps' reference times (e.g. 0.1 at 10 Hz)",
+        help="seconds between the two sweeps' reference times (e.g. 0.1 at 10 Hz); alone, "
+        "it bounds the objects' speeds and turns (see above)",
     )
 
 
@@ -686,7 +710,9 @@ def check_time_options(args):
     given = [flag for name, flag in _TIME_OPTIONS if getattr(args, name, None) is not None]
     if not given:
         return
-    if given == ["--interval"] and _files_carry_times(args):
+    # --interval alone: the interval of sweeps that hold their own capture times, or of
+    # two sweeps without (it bounds the objects' motions: a speed, a turn rate).
+    if given == ["--interval"] and (getattr(args, "sweep", None) or _files_carry_times(args)):
         return
     if getattr(args, "sweep", None) is None and not is_sequence(args.input):
         raise CLIError(
@@ -726,11 +752,16 @@ def read_capture_times(args, n, m):
             interval,
             where,
         )
-        if not timing and getattr(args, "interval", None) is not None:
-            raise CLIError(
-                f"--interval: {args.input} and its second sweep hold no capture times; give "
-                "them with --times and --sweep-times"
-            )
+        # No capture times: the interval bounds the motions, when --interval or a
+        # sequence's stamps give it (two files' names alone are no frame rate: an AV2
+        # name is a timestamp only in a real log, whose sweeps carry their times).
+        source = getattr(args, "input", None)
+        known = getattr(args, "interval", None) is not None or (
+            source is not None and is_sequence(source)
+        )
+        if not timing and interval is not None and known:
+            args.interval = interval  # for run.json and the speeds of the picture
+            return {"interval": interval}
         if timing:
             args.interval = timing["interval"]  # for run.json
             args.file_times = True
@@ -790,7 +821,8 @@ def _fit(X, init, args, steps, sweep=None, timing=None):
                 "correspondences alone, not with both a flow and --sweep"
             )
         params["ego_motion"] = ego
-    name = "EM" if sweep is None else "EM and ICP on --sweep" + (" (deskewed)" if timing else "")
+    deskewed = bool(timing) and timing.get("times") is not None
+    name = "EM" if sweep is None else "EM and ICP on --sweep" + (" (deskewed)" if deskewed else "")
     with steps.step(name), reported_warnings():
         estimator.fit(X, **params)
     if voxel_size is not None and X.shape[1] == 6:
@@ -826,21 +858,30 @@ def register(
 
     Returns ``(estimator, summary, fit_seconds, n_initial_clusters)``.
     """
+    import numpy as np
+
     from mmreg._validation import NotCorrespondencesError
 
     start = time.perf_counter()
     init_used = init_name(args, X)
     sweep = read_sweep(args)
     timing = read_capture_times(args, len(X), None if sweep is None else len(sweep))
+    no_returns = None
+    if sweep is not None:  # rows with no return (NaN, the origin) are dropped, and counted
+        no_returns = NoReturns(X, sweep)
+        sweep_name = getattr(args, "sweep", None) or f"frame {getattr(args, 'frame', 0) or 0} + 1"
+        X, sweep, timing = no_returns.apply(X, sweep, timing, input_name, sweep_name)
+    args.no_returns = no_returns
     try:
         estimator, n_initial = _fit(X, init, args, steps, sweep, timing)
     except NotCorrespondencesError as error:
         raise CLIError(f"{input_name}: {one_line(error)}") from None
     elapsed = time.perf_counter() - start
     residuals = moving = None
+    # The ego vehicle's own body (labelled -1) is no outlier: counted and drawn apart.
+    body = ego_body(estimator, len(X))
+    n_outliers = int(estimator.outlier_mask_.sum()) - int(body.sum())
     if sweep is not None:  # what is written: the first sweep and where its points move
-        import numpy as np
-
         X = np.hstack([X[:, :3], X[:, :3] + estimator.flow_])
         # Its b-points are its own flow, so |R a + t - b| is 0: the residual is the
         # distance from each moved point to the second sweep.
@@ -855,12 +896,12 @@ def register(
             estimator.sigmas_,
             residuals=residuals,
             moving=moving,
+            interval=getattr(args, "interval", None),
         )
         motions = (estimator.rotations_, estimator.translations_)
         n_moving = int(summary["moving"].sum())
-        found = (
-            f"{plural(estimator.n_clusters_, 'cluster')} ({n_moving} moving), "
-            f"{int(estimator.outlier_mask_.sum()):,} outliers"
+        found = f"{plural(estimator.n_clusters_, 'cluster')} ({n_moving} moving), " + count_line(
+            estimator, len(X)
         )
         if title is None:
             what = "points" if sweep is not None else "correspondences"
@@ -878,6 +919,7 @@ def register(
                 title=title,
                 camera=camera,
                 interval=getattr(args, "interval", None),
+                ego_body=body if body.any() else None,
             )
             png = render_png(figure)
     if args.out is not None:
@@ -898,11 +940,19 @@ def register(
             "n_correspondences": len(X),
             "n_clusters": estimator.n_clusters_,
             "n_moving": n_moving,
-            "n_outliers": int(estimator.outlier_mask_.sum()),
+            "n_outliers": n_outliers,
+            "n_ego_body": int(body.sum()),
             "n_iter": estimator.n_iter_,
             "converged": bool(estimator.converged_),
             "fit_seconds": round(elapsed, 3),
         } | (extra_run or {})
+        extra_files = dict(extra_files or {})
+        if body.any():  # for "mmreg view": the body drawn apart
+            extra_files["ego_body.npy"] = npy_bytes(body)
+        if no_returns is not None:
+            run |= no_returns.record()
+            if no_returns.n:  # the rows of INPUT that labels.npy and X.npy hold
+                extra_files["indices.npy"] = npy_bytes(np.flatnonzero(no_returns.keep))
         if camera is not None:  # for "mmreg view": the camera view in pixels
             run["camera"] = {k: camera[k] for k in ("fx", "fy", "cx", "cy", "width", "height")}
         with steps.step(f"writing {args.out}"):
@@ -925,12 +975,15 @@ def register(
     return estimator, summary, elapsed, n_initial
 
 
-# The table printed: (column of the summary, header, format).
+# The table printed: (column of the summary, header, format). "moved": the object's own
+# displacement (its centroid's, relative to the background), not |t| about the sensor;
+# "speed" only when the interval between the frames is known.
 TABLE = [
     ("label", "cluster", ""),
     ("size", "points", ",d"),
     ("rotation_angle_deg", "rotation [deg]", ".3f"),
-    ("translation_norm", "translation", ".3f"),
+    ("displacement", "moved", ".3f"),
+    ("speed", "speed", ".3g"),
     ("residual_scale", "residual", ".3g"),
     ("displacement_vs_background", "vs background", ".3f"),
     ("moving", "moving", ""),
@@ -981,12 +1034,13 @@ def run(args):
         moving = summary["moving"].map({True: "yes", False: "no"})
         table = summary.assign(moving=moving.where(~summary["background"], "background"))
         print(
-            f"{len(X):,} {'points' if X.shape[1] == 3 else 'correspondences'}: "
+            f"{len(estimator.labels_):,} {'points' if X.shape[1] == 3 else 'correspondences'}: "
             f"{plural(estimator.n_clusters_, 'cluster')}, "
-            f"{plural(int(estimator.outlier_mask_.sum()), 'outlier')}, "
+            f"{count_line(estimator, len(estimator.labels_), getattr(args, 'no_returns', None))}, "
             f"{plural(estimator.n_iter_, 'iteration')}, "
             f"{time.perf_counter() - start:.2f} s (the fit {elapsed:.2f} s)"
         )
-        print(format_table(table, TABLE))
+        spec = [row for row in TABLE if row[0] != "speed" or table["speed"].notna().any()]
+        print(format_table(table, spec))
         print(f"written: {args.out}/ (labels.npy motions.json summary.csv clusters.ply result.png)")
     return 0

@@ -150,9 +150,11 @@ def run(args):
         moving = result.moving
         n_moving = int(np.sum(moving)) if moving is not None else 0
         what = "correspondences" if X.shape[1] == 6 and not result.derived else "points"
+        body = np.zeros(len(labels), bool) if result.ego_body is None else result.ego_body
         title = (
             f"{result.name}: {len(X):,} {what} -> {plural(len(rotations), 'cluster')} "
-            f"({n_moving} moving), {int(np.sum(labels < 0)):,} outliers"
+            f"({n_moving} moving), {plural(int(np.sum((labels < 0) & ~body)), 'outlier')}"
+            + (f", {int(body.sum()):,} on the ego vehicle's body" if body.any() else "")
         )
     interval = args.interval
     if interval is None and result.path.is_dir() and (result.path / "run.json").exists():
@@ -169,6 +171,7 @@ def run(args):
         frame=args.frame,
         interval=interval,
         range_=args.range_,
+        ego_body=result.ego_body,
     )
     picture = render_picture(fig, fmt, dpi=args.dpi)
     with reading(out), mmio.atomic_write(out) as handle:

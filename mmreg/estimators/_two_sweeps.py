@@ -50,6 +50,7 @@ from mmreg.sweeps._island_motions import (
     translation_starts,
 )
 from mmreg.sweeps._islands import voxel_islands
+from mmreg.sweeps._motion_bounds import bound_motions
 from mmreg.sweeps._new_places import MIN_NEW_PLACE, new_place_shares
 from mmreg.sweeps._slow_movers import beyond_spacing, slow_movers
 
@@ -137,9 +138,22 @@ def _check_times(times, n, name):
     return times
 
 
+def _check_interval(interval):
+    """``interval`` as a finite float > 0 (seconds); a clear error otherwise."""
+    if isinstance(interval, bool) or not isinstance(interval, (Real, np.number)):
+        raise TypeError(f"interval must be a number of seconds; got {type(interval).__name__}.")
+    interval = float(interval)
+    if not np.isfinite(interval) or interval <= 0:
+        raise ValueError(f"interval must be a finite number of seconds > 0; got {interval}.")
+    return interval
+
+
 def _check_timing(times, sweep_times, interval, n, m):
-    """``(times, sweep_times, interval)`` checked, or None when no time is given."""
-    if times is None and sweep_times is None and interval is None:
+    """``(times, sweep_times, interval)`` checked, or None when no capture time is given
+    (``interval`` alone bounds the motions, see :mod:`mmreg.sweeps._motion_bounds`)."""
+    if times is None and sweep_times is None:
+        if interval is not None:
+            _check_interval(interval)
         return None
     if times is None or sweep_times is None or interval is None:
         raise ValueError(
@@ -153,11 +167,7 @@ def _check_timing(times, sweep_times, interval, n, m):
             )
             + "."
         )
-    if isinstance(interval, bool) or not isinstance(interval, (Real, np.number)):
-        raise TypeError(f"interval must be a number of seconds; got {type(interval).__name__}.")
-    interval = float(interval)
-    if not np.isfinite(interval) or interval <= 0:
-        raise ValueError(f"interval must be a finite number of seconds > 0; got {interval}.")
+    interval = _check_interval(interval)
     return _check_times(times, n, "times"), _check_times(sweep_times, m, "sweep_times"), interval
 
 
@@ -372,7 +382,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
       above 1, this repeats while the labels change: a multi-body ICP around the EM).
       A cluster that only slides along its own surfaces, or that its motion shows at a
       new place with under a tenth of its points (:mod:`mmreg.sweeps._new_places`),
-      then rejoins the static world.
+      then rejoins the static world. A cluster whose motion relative to the static world
+      no vehicle or person can make (:mod:`mmreg.sweeps._motion_bounds`: faster than
+      50 m/s or turning faster than 90 deg/s, 360 for one of a person's size, when
+      ``interval`` is known, else farther than ``max_displacement``; a level sheet
+      sliding along itself) is taken apart: its points rejoin
+      the static world where its motion explains them, and are outliers elsewhere.
 
     Parameters
     ----------
@@ -488,6 +503,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
     ego_scale_ : float
         Raw mode: the robust point-to-plane residual scale of the ego-motion ICP (the
         noise the islands' tests read residuals in); NaN otherwise.
+    interval_ : float or None
+        The ``interval`` given to ``fit`` (seconds between the sweeps), or None.
+    impossible_motions_ : list of str
+        Raw mode: the clusters taken apart because no road user moves so, one reason
+        each: ``"speed"``, ``"turn"`` (with ``interval_``), ``"reach"`` (without) or
+        ``"sheet"`` (see :mod:`mmreg.sweeps._motion_bounds`).
     ground_mask_ : ndarray of shape (n_samples,) or None
         Raw mode: which points of the first sweep were taken for the ground (all in the
         static world); None when the ground was kept.
@@ -656,7 +677,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             The same for the points of ``sweep``, from its own reference time.
         interval : float or None
             Seconds between the two sweeps' reference times (Argoverse 2: the difference
-            of the two timestamps, about 0.1 s).
+            of the two timestamps, about 0.1 s). Alone (without ``times`` and
+            ``sweep_times``) it only bounds the objects' motions in raw mode: a speed and
+            a turn rate no road user exceeds (see :mod:`mmreg.sweeps._motion_bounds`);
+            without it, ``max_displacement`` bounds them.
         ground, sweep_ground : array-like of shape (n_samples,) and (m,), bool, or None
             Raw mode: the known ground points of each sweep (e.g. from a map: Argoverse 2
             takes points within 0.3 m of its ground height raster). Given together, they
@@ -779,6 +803,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.ego_body_mask_ = np.zeros(len(X), dtype=bool)
         self.sweep_ego_body_mask_ = np.zeros(0 if sweep is None else len(sweep), dtype=bool)
         self.ego_scale_ = np.nan
+        self.impossible_motions_ = []
+        self.interval_ = None
         check_coordinate_range(X)
         rng = check_random_state(self.random_state)
         self._resolve_lengths()
@@ -812,6 +838,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         _check_features(X)
         sweep = _check_sweep(sweep, 3)
         timing = _check_timing(times, sweep_times, interval, len(X), len(sweep))
+        self.interval_ = None if interval is None else float(interval)
         if X.shape[1] == 6 and (ground is not None or sweep_ground is not None):
             raise ValueError(
                 "ground and sweep_ground are for two raw sweeps (X of shape (n, 3)); with "
@@ -1580,6 +1607,24 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 # Motions fitted to deskewed points put the raw ones near their view.
                 None if context[4] is None else self.max_distance_,
                 whole,
+            )
+            # Motions no vehicle or person can make: taken apart (the static world where
+            # its motion explains them, else outliers); mmreg.sweeps._motion_bounds.
+            labels, (rotations, translations, scales, sigmas), static, self.impossible_motions_ = (
+                bound_motions(
+                    a,
+                    labels,
+                    (rotations, translations, scales, sigmas),
+                    static,
+                    (sweep, tree, normals) if whole is None else whole[1],
+                    sigma,
+                    scale=self._length_scale(),
+                    # "auto" stands for an unknown interval, searched twice as far.
+                    reach=self.max_displacement_
+                    * (2.0**_WIDENINGS if self.max_displacement == "auto" else 1.0),
+                    interval=getattr(self, "interval_", None),
+                    up=np.eye(3)[2] if is_z_up_sweep(a if whole is None else whole[0]) else None,
+                )
             )
         return labels, estimator, rotations, translations, scales, sigmas, static
 

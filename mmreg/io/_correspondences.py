@@ -51,7 +51,8 @@ def _check_lidar_points(points, source, name):
 def _read_point_file(path, name, *, colors=False):
     """``(points, rgb or None, times or None)`` of any point file (checked readable).
 
-    Clouds and arrays must be finite; LiDAR sweep files keep their invalid rows.
+    Clouds and arrays must be finite; LiDAR sweep files and ``.pcd`` clouds keep their
+    rows without a return (NaN).
     """
     suffix = _extension(path, _POINT_EXTENSIONS, name)
     kind = _lidar_files.lidar_kind(path)
@@ -59,6 +60,15 @@ def _read_point_file(path, name, *, colors=False):
         points, times, _ = _lidar_files.read_lidar_file(path, kind)
         return _check_lidar_points(points, path, name), None, times
     rgb = None
+    if suffix == ".pcd":
+        # PCL writes a sensor's missing returns as NaN rows (an organised cloud keeps
+        # its grid, HEIGHT > 1; a driver's is_dense false), which stay in place as a
+        # LiDAR file's do; infinity is still refused.
+        points, rgb = _read_cloud_file(path, colors=colors)
+        points = _check_lidar_points(points, path, name)
+        if np.isinf(points).any():
+            _check_points(points, path, 3, name)  # raises, naming the rows
+        return points, rgb, None
     if suffix in _CLOUD_EXTENSIONS:
         points, rgb = _read_cloud_file(path, colors=colors)
     elif suffix == ".npy":

@@ -30,8 +30,9 @@ def read_point_cloud(path, *, colors=False, times=False):
     Returns
     -------
     points : ndarray of shape (n, 3)
-        A LiDAR sweep's invalid returns (NaN or all-zero rows) are kept in place; every
-        other format must be finite.
+        A LiDAR sweep's invalid returns (NaN or all-zero rows) are kept in place, and so
+        are a ``.pcd``'s NaN rows (an organised cloud's missing returns); every other
+        format must be finite.
     colors : ndarray of shape (n, 3) or None
         Only when ``colors=True``: RGB in ``[0, 1]``, or ``None`` when the file holds no
         colours (always for ``.xyz``, array and LiDAR files).
@@ -44,8 +45,8 @@ def read_point_cloud(path, *, colors=False, times=False):
         If the file is missing.
     ValueError
         If it is unreadable, corrupt, empty, not a whole number of points (``.bin``,
-        ``.pcd.bin``), lacks a column (``.feather``), holds NaN or infinity (except a
-        LiDAR sweep), is a ROS bag (many frames: see
+        ``.pcd.bin``), lacks a column (``.feather``), holds NaN or infinity (except NaN
+        in a LiDAR sweep or a ``.pcd``), is a ROS bag (many frames: see
         :func:`mmreg.datasets.open_sequence`), or the extension is unknown.
 
     Examples

@@ -37,6 +37,7 @@ def plot_result(
     interval=None,
     range_=None,
     title=None,
+    ego_body=None,
 ):
     """The picture of a registration in the view that suits the frame of its points.
 
@@ -68,6 +69,9 @@ def plot_result(
     range_ : float, default=None
         Half width of a LiDAR picture's window [m]; None: 50.
     title : str, default=None
+    ego_body : array-like of bool, default=None
+        One per point: the ego vehicle's own body, drawn apart from the outliers in a
+        LiDAR picture (see :func:`plot_sweep`).
 
     Returns
     -------
@@ -108,6 +112,7 @@ def plot_result(
             interval=interval,
             range_=SWEEP_RANGE if range_ is None else range_,
             ax=fig.add_subplot(),
+            ego_body=ego_body,
         )
         if title is not None:
             fig.suptitle(title, fontsize=11)

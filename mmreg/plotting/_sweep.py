@@ -19,6 +19,9 @@ SWEEP_RANGE = 50.0
 # (walls, poles, trees), so that a sweep reads as a map from above.
 _GROUND_GREY, _TALL_GREY, _TALL = 0.74, 0.3, 4.0
 _SWEEP_LEGEND_ENTRIES = 14
+# The ego vehicle's own body: a pale blue under the sensor's mark, neither the static
+# world's grey nor the outliers' black.
+_BODY_COLOR = (0.55, 0.72, 0.9)
 
 
 def _static_reference(labels, moving, n_clusters):
@@ -78,6 +81,34 @@ def _draw_static(ax, points, diameter):
             zorder=1,
         )
     )
+
+
+def _draw_body(ax, points, diameter):
+    """The ego vehicle's own body, pale blue, under the sensor's mark."""
+    from mmreg.plotting._stamped import StampedPoints
+
+    ax.add_artist(
+        StampedPoints(
+            points[:, :2],
+            np.zeros(len(points), dtype=np.int64),
+            [_BODY_COLOR],
+            diameter,
+            rasterized=True,
+            zorder=2,
+        )
+    )
+
+
+def _check_body(ego_body, n):
+    """``ego_body`` as n bools (None: none)."""
+    if ego_body is None:
+        return np.zeros(n, dtype=bool)
+    body = np.asarray(ego_body)
+    if body.dtype != bool or body.shape != (n,):
+        raise ValueError(
+            f"ego_body must be one bool per point, shape ({n},); got {body.dtype} {body.shape}."
+        )
+    return body
 
 
 def _draw_outliers(ax, points, diameter):
@@ -150,6 +181,7 @@ def plot_sweep(
     label_names=None,
     max_points=300_000,
     random_state=0,
+    ego_body=None,
 ):
     """A LiDAR sweep from above: the static world in grey, moving objects outlined, arrows.
 
@@ -196,6 +228,10 @@ def plot_sweep(
         At most this many static points are drawn (thinned at random beyond).
     random_state : int, default=0
         Seeds the thinning.
+    ego_body : array-like of bool, default=None
+        One per point: returns from the ego vehicle's own body (labelled -1, as
+        :attr:`mmreg.SweepRegistration.ego_body_mask_` says), drawn pale blue around the
+        sensor and counted apart, not as outliers.
 
     Returns
     -------
@@ -224,6 +260,7 @@ def plot_sweep(
     if points.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3); got {points.shape}.")
     labels = _check_labels(labels, len(points))
+    body = _check_body(ego_body, len(points))
     range_ = float(range_)
     if not (np.isfinite(range_) and range_ > 0):
         raise ValueError(f"range_ must be a positive number of metres; got {range_!r}.")
@@ -261,7 +298,9 @@ def plot_sweep(
         static = np.sort(rng.choice(static, max_points, replace=False))
     diameter = _sweep_layout.marker_diameter(points[static], ppm)
     _draw_static(ax, points[static], diameter)
-    outliers = np.flatnonzero(window & (labels < 0))
+    if body.any():
+        _draw_body(ax, points[window & body], diameter)
+    outliers = np.flatnonzero(window & (labels < 0) & ~body)
     if len(outliers):
         _draw_outliers(ax, points[outliers], diameter)
     # One round factor for every arrow, from their lengths seen from above.
@@ -292,6 +331,7 @@ def plot_sweep(
         interval,
         range_,
         label_names,
+        body,
     )
     if title is not None:
         ax.set_title(title, fontsize=10)
@@ -370,6 +410,7 @@ def _sweep_legend(
     interval,
     range_,
     label_names,
+    body,
 ):
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -404,7 +445,20 @@ def _sweep_legend(
     beyond = len(objects) - len(shown)
     if beyond:
         handles.append(Patch(color="none", label=f"{beyond} moving beyond {range_:g} m, not drawn"))
-    n_out = int(np.sum(labels < 0))
+    n_body = int(body.sum())
+    if n_body:
+        handles.append(
+            Line2D(
+                [],
+                [],
+                linestyle="none",
+                marker="o",
+                markersize=4,
+                color=_BODY_COLOR,
+                label=f"the ego vehicle's body ({n_body:,} pts)",
+            )
+        )
+    n_out = int(np.sum((labels < 0) & ~body))
     if n_out:
         handles.append(
             Line2D(

@@ -13,15 +13,24 @@ Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas
 the estimator reports it), ``indices`` and ``meta``: a JSON string with the job's summary
 row and the fingerprint of (job, estimator) the result belongs to. ``indices`` (n,) are
 the rows of the job's input the fit saw: for a LiDAR sweep pair, the rows of the first
-sweep's file (``--ground drop`` leaves the ground rows out, a bag or KITTI scan its NaN
-and all-zero rows), so ``labels[k]`` and ``flow[k]`` belong to row ``indices[k]`` of the
-sweep as the file holds it; ``arange(n)`` for frames and correspondence files. A sweep
-pair also stores ``sweep_flow`` (float32, one row per row of the file) and
-``sweep_dynamic`` (bool): the flow of every row, the rows the fit did not see (or left
-without a motion: outliers) moving with the fitted static world, and whether it moves
-0.05 m or more beyond that motion (the Argoverse 2 challenge's rule). For an Argoverse 2
-log these also go to ``OUT/av2_scene_flow/<log>/<timestamp_ns>.feather``, the scene-flow
-challenge's format (:func:`write_scene_flow`), ready for the official evaluation.
+sweep's file (``--ground drop`` leaves the ground rows out), so ``labels[k]`` and
+``flow[k]`` belong to row ``indices[k]`` of the sweep as the file holds it;
+``arange(n)`` for frames and correspondence files. Rows that hold no return (NaN, or
+several all-zero rows: a bag with ``is_dense`` false, an organised cloud, a KITTI scan)
+are left out of every job, in both sweeps, and counted (``n_no_return``). A fit that
+finds the ego vehicle's own body (:attr:`~mmreg.SweepRegistration.ego_body_mask_`)
+stores ``ego_body`` (bool, one per label): those rows are labelled -1 but are no
+outliers (``n_ego_body`` counts them apart). A sweep
+pair also stores ``sweep_flow`` (float32, one row per row of the file),
+``sweep_dynamic`` (bool) and ``sweep_valid`` (bool): the flow of every row, the rows the
+fit did not see (or left without a motion: outliers) moving with the fitted static
+world, whether it moves 0.05 m or more beyond that motion (the Argoverse 2 challenge's
+rule; never the ego vehicle's body), and whether the row is a return from the world (not
+a row without a return, not the ego vehicle's body: the annotations' ``is_valid``). For
+an Argoverse 2 log the flow and ``is_dynamic`` also go to
+``OUT/av2_scene_flow/<log>/<timestamp_ns>.feather``, the scene-flow challenge's format
+(:func:`write_scene_flow`: four columns, as its submission check demands; no
+``is_valid``), ready for the official evaluation.
 
 A job of two sweeps (:func:`dataset_jobs`: LiDAR logs by default) loads the first sweep
 ``X`` (n, 3) (or ``[a | a + flow]`` (n, 6) with a network's flow, refinement mode) and
@@ -96,6 +105,7 @@ __all__ = [
     "read_job_result",
     "run_dataset",
     "sweep_flow",
+    "sweep_valid",
     "write_scene_flow",
 ]
 
@@ -115,6 +125,8 @@ SUMMARY_COLUMNS = [
     "n_clusters",
     "n_moving",
     "n_outliers",
+    "n_ego_body",
+    "n_no_return",
     "n_iter",
     "converged",
     "load_s",
@@ -161,6 +173,11 @@ def _fit_parameters(estimator):
         return None
     named = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
     return {p.name for p in parameters if p.kind in named}
+
+
+def _named(estimator):
+    """The names ``estimator.fit`` takes (none when it has no signature)."""
+    return _fit_parameters(estimator) or set()
 
 
 def _takes_sweep(estimator):
@@ -255,19 +272,59 @@ def _static_motion(model):
     return np.asarray(model.rotations_)[static], np.asarray(model.translations_)[static]
 
 
-def sweep_flow(points, indices, flow, rotation, translation):
+def sweep_flow(points, indices, flow, rotation, translation, ego_body=None):
     """The flow of every row of a sweep from a fit on the rows ``indices``.
 
     Rows the fit did not see (dropped ground) and rows it left without a motion (NaN
     flow: outliers) move with the static world, ``R p + t - p``. ``is_dynamic``: the
-    flow differs from that by at least 0.05 m, the Argoverse 2 challenge's rule.
+    flow differs from that by at least 0.05 m, the Argoverse 2 challenge's rule; never on
+    the rows ``ego_body`` flags (one bool per row of ``flow``: returns from the ego
+    vehicle's own body, which keep their zero flow, where they were in the sensor's
+    frame, but are no moving object).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.runner import sweep_flow
+    >>> points = np.array([[10.0, 0, 0], [1.0, 0, 0]])  # a wall, the car's bonnet
+    >>> flow = np.array([[-1.0, 0, 0], [0.0, 0, 0]])  # the car drove 1 m on
+    >>> out, dynamic = sweep_flow(points, [0, 1], flow, np.eye(3), [-1.0, 0, 0],
+    ...                           ego_body=[False, True])
+    >>> out.tolist(), dynamic.tolist()
+    ([[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]], [False, False])
     """
+    points = np.asarray(points, dtype=float)
+    indices = np.asarray(indices, dtype=np.intp)
     ego = points @ np.asarray(rotation).T + translation - points
     out = ego.copy()
     fitted = np.asarray(flow)[:, :3]
     out[indices] = np.where(np.isfinite(fitted), fitted, ego[indices])
     dynamic = np.linalg.norm(out - ego, axis=1) >= DYNAMIC_THRESHOLD
+    if ego_body is not None:
+        dynamic[indices[np.asarray(ego_body, dtype=bool)]] = False
     return out, dynamic
+
+
+def sweep_valid(points, indices, ego_body=None):
+    """Whether each row of a sweep is a return from the world: not NaN, not one of the
+    driver's rows at the origin, not the ego vehicle's own body (``ego_body``: one bool
+    per row of ``indices``). The Argoverse 2 annotations' ``is_valid``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.runner import sweep_valid
+    >>> points = np.array([[10.0, 0, 0], [1.0, 0, 0], [np.nan] * 3, [5.0, 5, 0]])
+    >>> sweep_valid(points, [0, 1, 3], ego_body=[False, True, False]).tolist()
+    [True, False, False, True]
+    """
+    from mmreg._validation import invalid_rows
+
+    points = np.asarray(points, dtype=float)
+    valid = ~invalid_rows(np.hstack([points, points]))
+    if ego_body is not None:
+        valid[np.asarray(indices, dtype=np.intp)[np.asarray(ego_body, dtype=bool)]] = False
+    return valid
 
 
 def _known_ground(data, model):
@@ -317,7 +374,44 @@ def _with_ground_choice(model, data):
     return model
 
 
-def _picture(X, model, data, name):
+def _drop_no_returns(data):
+    """The job's data without the rows that hold no return, and how many the first sweep had.
+
+    A row with NaN, or one of several at the origin (a driver's failed returns: a bag
+    with ``is_dense`` false, an organised cloud, a KITTI scan), is no measurement
+    (:func:`mmreg._validation.invalid_rows`): it is left out of the fit and of the
+    result's rows (``indices`` no longer name it), in both sweeps, with its capture time,
+    ground flag and truth. The count is of the first sweep's file
+    (``sweep_points``) when the job gives it: rows a sequence job dropped itself count too.
+    """
+    from mmreg._validation import invalid_rows
+
+    def no_return(values):  # points (odd columns) or correspondences [a | b]
+        values = np.asarray(values, dtype=float)
+        return invalid_rows(values if values.shape[1] % 2 == 0 else np.hstack([values] * 2))
+
+    X = np.asarray(data["X"], dtype=float)
+    keep = ~no_return(X)
+    points = data.get("sweep_points")
+    counted = int(np.count_nonzero(~keep if points is None else no_return(points)))
+    keep_sweep = None if data.get("sweep") is None else ~no_return(data["sweep"])
+    if keep.all() and (keep_sweep is None or keep_sweep.all()):
+        return data, counted
+    if not keep.any():
+        raise ValueError(f"every one of its {len(X):,} rows holds no return (NaN or zero).")
+    out = dict(data)
+    out["indices"] = np.asarray(data.get("indices", np.arange(len(X))))[keep]
+    for key in ("X", "times", "labels_true", "flow_true", "ground"):
+        if out.get(key) is not None:
+            out[key] = np.asarray(out[key])[keep]
+    if keep_sweep is not None:
+        for key in ("sweep", "sweep_times", "sweep_ground"):
+            if out.get(key) is not None:
+                out[key] = np.asarray(out[key])[keep_sweep]
+    return out, counted
+
+
+def _picture(X, model, data, name, ego_body=None):
     """The PNG bytes of one job's result, drawn as ``mmreg view`` draws it."""
     import io
 
@@ -329,6 +423,7 @@ def _picture(X, model, data, name):
         (model.rotations_, model.translations_),
         moving=getattr(model, "moving_", None),
         interval=data.get("interval"),
+        ego_body=ego_body,
         title=f"{name}: {len(X):,} points -> {model.n_clusters_} clusters",
     )
     buffer = io.BytesIO()
@@ -352,6 +447,7 @@ def _process(job, estimator, pictures=False):
             data = job.load()
         model = _with_ground_choice(clone(estimator), data)
         data, row["ground"] = _known_ground(data, model)
+        data, row["n_no_return"] = _drop_no_returns(data)
         X = np.asarray(data["X"], dtype=float)
         row["n"] = len(X)
         sweep = data.get("sweep")
@@ -368,7 +464,10 @@ def _process(job, estimator, pictures=False):
         )
         if timed:
             params.update({key: data[key] for key in _TIMING})
+        elif sweep is not None and data.get("interval") and "interval" in _named(model):
+            params["interval"] = data["interval"]  # alone: it bounds the objects' motions
         row["capture_times"] = timed
+        row["interval"] = float(params.get("interval", math.nan))
         if row["ground"] == "masks":
             params.update({key: data[key] for key in _GROUND})
             row["n_ground"] = int(np.count_nonzero(data["ground"]))
@@ -381,11 +480,15 @@ def _process(job, estimator, pictures=False):
             model.fit(X, **params)
         row["fit_s"] = time.perf_counter() - start
         moving = getattr(model, "moving_", None)
+        # The ego vehicle's own body is labelled -1 but is no outlier: counted apart.
+        body = getattr(model, "ego_body_mask_", None)
+        body = np.zeros(len(X), bool) if body is None else np.asarray(body, dtype=bool)
         row.update(
             status="done",
             n_clusters=int(model.n_clusters_),
             n_moving=int(np.sum(moving)) if moving is not None else -1,
-            n_outliers=int(np.sum(model.labels_ < 0)),
+            n_outliers=int(np.sum((model.labels_ < 0) & ~body)),
+            n_ego_body=int(body.sum()),
             n_iter=int(getattr(model, "n_iter_", -1)),
             converged=bool(getattr(model, "converged_", True)),
             warnings=" | ".join(sorted({str(w.message) for w in [*loading, *caught]}))[:500],
@@ -409,15 +512,20 @@ def _process(job, estimator, pictures=False):
         }
         if moving is not None:
             arrays["moving"] = np.asarray(moving, dtype=bool)
+        if hasattr(model, "ego_body_mask_"):
+            arrays["ego_body"] = body
         points = data.get("sweep_points")
         if points is not None:
             row["n_file"] = len(points)
+            points = np.asarray(points, float)
             flow, dynamic = sweep_flow(
-                np.asarray(points, float), indices, model.flow_, *_static_motion(model)
+                points, indices, model.flow_, *_static_motion(model), ego_body=body
             )
             arrays["sweep_flow"], arrays["sweep_dynamic"] = flow.astype(np.float32), dynamic
+            arrays["sweep_valid"] = sweep_valid(points, indices, body)
         if pictures:  # drawn here, on the worker; written by the caller with the result
-            arrays[_PICTURE] = np.frombuffer(_picture(X, model, data, job.name), dtype=np.uint8)
+            png = _picture(X, model, data, job.name, body)
+            arrays[_PICTURE] = np.frombuffer(png, dtype=np.uint8)
     except Exception as error:  # one job's failure is its row, not the run's end
         row["error"] = f"{type(error).__name__}: {' '.join(str(error).split())}"[:1000]
         return job.name, None, row
@@ -711,7 +819,9 @@ def run_dataset(
         One row per job, in the jobs' order: ``job``, ``status`` (``"done"`` or
         ``"error"``), ``n`` (correspondences, or points of the first sweep; ``n_sweep``:
         of the second), ``n_clusters``, ``n_moving``,
-        ``n_outliers``, ``n_iter``, ``converged``, ``load_s``, ``fit_s`` (seconds, on the
+        ``n_outliers`` (label -1, the ego vehicle's body left out), ``n_ego_body`` (returns
+        from the ego vehicle's own body), ``n_no_return`` (rows of the first sweep that
+        hold no return, left out), ``n_iter``, ``converged``, ``load_s``, ``fit_s`` (seconds, on the
         worker), ``resumed`` (read from an earlier run), ``error``, ``warnings``, and with
         the truth ``iou``, ``objects_found``, ``moving_objects``, ``moving_found``
         (objects besides the largest found with IoU >= 0.5), ``epe3d``, ``acc3ds``,
@@ -719,7 +829,9 @@ def run_dataset(
         scene_flow_metrics`), ``epe_static`` and ``epe_moving`` (the mean EPE on the
         largest object's points and on the others'). Points with a negative true label
         are not scored. ``capture_times``: whether ``fit`` was given the points' capture
-        times; ``ground``: whether the map's ground masks were handed to ``fit``
+        times; ``interval``: the seconds between the sweeps given to ``fit`` (with the
+        times, or alone: a sequence's stamps, which bound the objects' motions), else
+        NaN; ``ground``: whether the map's ground masks were handed to ``fit``
         (``"masks"``), the ground rows dropped (``"dropped"``: ``ground="drop"``, or
         ``"auto"`` with a ``fit`` that takes no masks, or found by the estimator and left
         out) or kept (``"kept"``), or found by the estimator and joined to the static

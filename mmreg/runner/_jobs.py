@@ -548,6 +548,8 @@ class SequenceSweepPairJob:
         if getattr(sequence, "poses", None) is not None:
             motion = sequence.ego_motion(self.index, self.index + 1)
             data["ego_motion"] = (motion[:3, :3], motion[:3, 3])
+        if not timed and first.timestamp is not None and second.timestamp is not None:
+            data["interval"] = second.timestamp - first.timestamp  # bounds the motions
         return data | {"pairs": "sweeps"}
 
 
