@@ -33,11 +33,10 @@ def _world(log, k):
 class _Ghosts(BaseEstimator):
     """SweepRegistration that also reports static points moving, in chosen pairs.
 
-    ``ghosts`` maps the size of a pair's first sweep to ``(low, high, shift)``: its
-    points inside the box ``[low, high]`` (sensor frame) become one more cluster,
-    moving by ``shift`` relative to the static world. That is the kind of motion a pair
-    alone finds on a static surface (a parked car at 0.08 m a frame, a wall sliding
-    along itself).
+    ``ghosts`` maps the size of a pair's first sweep to ``(mask, shift)``: its points in
+    ``mask`` become one more cluster, moving by ``shift`` relative to the static world.
+    That is the kind of motion a pair alone finds on a static surface (a parked car at
+    0.08 m a frame, a wall sliding along itself).
     """
 
     def __init__(self, ghosts=None, random_state=None):
@@ -51,8 +50,8 @@ class _Ghosts(BaseEstimator):
             if name.endswith("_") and not name.startswith("_"):
                 setattr(self, name, value)
         if len(points) in (self.ghosts or {}):
-            low, high, shift = self.ghosts[len(points)]
-            ghost = np.all((points >= low) & (points <= high), axis=1) & (self.labels_ >= 0)
+            mask, shift = self.ghosts[len(points)]
+            ghost = mask & (self.labels_ >= 0)
             k = self.n_clusters_
             R, t = self.ego_motion_
             self.labels_ = np.where(ghost, k, self.labels_)
@@ -92,7 +91,7 @@ def test_a_ghost_seen_in_one_pair_is_dropped(street):
     low, high = points[nearest] - [3.0, 3.0, 1.0], points[nearest] + [3.0, 3.0, 3.0]
     patch = np.all((points >= low) & (points <= high), axis=1) & on
     assert patch.sum() > 50
-    pair = _Ghosts({len(points): (low, high, np.array([1.0, 0.0, 0.0]))}, random_state=0)
+    pair = _Ghosts({len(points): (patch, np.array([1.0, 0.0, 0.0]))}, random_state=0)
     alone = clone(pair).fit(points, sweep=log.frames[k + 1])
     assert alone.moving_[alone.labels_[patch]].all()  # the pair alone reports it moving
     est = SequenceRegistration(pair, random_state=0).fit(log.frames, times=log.times)
@@ -140,7 +139,7 @@ def test_a_parked_car_that_two_pairs_call_moving_stays_static(street):
         nearest = np.argmin(np.where(inside, np.linalg.norm(points, axis=1), np.inf))
         low, high = points[nearest] - 2.5, points[nearest] + 2.5
         cars[k] = np.all((points >= low) & (points <= high), axis=1) & inside
-        ghosts[len(points)] = (low, high, np.array(shift))
+        ghosts[len(points)] = (cars[k], np.array(shift))
     pair = _Ghosts(ghosts, random_state=0)
     for k, car in cars.items():  # each pair alone calls the car moving
         alone = clone(pair).fit(log.frames[k], sweep=log.frames[k + 1])

@@ -9,6 +9,7 @@ predicted motion is tested point by point against the static world's in the next
 and a motion that no second pair confirms (a ghost) is never reported.
 """
 
+import inspect
 from dataclasses import dataclass, field
 from numbers import Integral, Real
 
@@ -20,6 +21,7 @@ from sklearn.utils import Bunch, check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval
 
 from mmreg._validation import invalid_rows
+from mmreg.sweeps._explained import EXPLAINED_SPACINGS
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
 from mmreg.tracking._evidence import near_points, track_claim
@@ -55,6 +57,10 @@ _MIN_OVERLAP = 0.3
 _MOTION_TOLERANCE = 0.04
 # The prediction's twist is tried at these shares of its speed.
 _SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
+# The ego vehicle's body (as SweepRegistration finds it): within this share of tau of the
+# sensor, and where the last sweep's body was within this share.
+_BODY_REACH = 0.6
+_BODY_MATCH = 0.01
 # A place is hidden from a sweep behind a return this much nearer (share of tau).
 _HIDDEN = 0.05
 # Points kept per track (its shape for the prediction and the association).
@@ -80,8 +86,13 @@ class _Frame:
     track_of: np.ndarray | None = None  # track key of each valid row, -1 none
     motions: dict = field(default_factory=dict)  # track key -> 4 x 4 motion to the next
     rows: list = field(default_factory=list)  # per-track table rows (key, ...)
+    # Set by the pair of which this frame is the second sweep: the valid rows where the
+    # tracks seen in the first sweep land (track key, -1 none), and those tracks' twists.
+    carried: np.ndarray | None = None
+    carried_twists: dict = field(default_factory=dict)
     ego: np.ndarray | None = None  # 4 x 4 ego motion to the next frame
     up: np.ndarray | None = None  # the vertical, in a z-up LiDAR sweep
+    seconds: bool = False  # whether ``time`` is in seconds (else the frame's index)
 
     @property
     def returns(self):
@@ -329,6 +340,7 @@ class SequenceRegistration(BaseEstimator):
         valid = ~invalid_rows(np.hstack([points, points]))
         index = state.n_frames
         frame = _Frame(index, points, valid, self._time(index, time), given_pose=pose)
+        frame.seconds = time is not None or self.frame_rate is not None
         if valid.sum() >= 3 and is_z_up_sweep(points[valid]):
             frame.up = np.array([0.0, 0.0, 1.0])
         if state.previous is None:
@@ -340,19 +352,19 @@ class SequenceRegistration(BaseEstimator):
             state.pending.append(state.previous)
         state.previous = frame
         state.n_frames += 1
-        ready = [f for f in state.pending if f.index <= index - 1 - self.lookahead]
+        chain = [*state.pending, frame]  # each pending frame and the one after it
+        self.finished_ = [
+            self._result(f, after)
+            for f, after in zip(chain, chain[1:], strict=False)
+            if f.index <= index - 1 - self.lookahead
+        ]
         state.pending = [f for f in state.pending if f.index > index - 1 - self.lookahead]
-        self.finished_ = [self._result(f) for f in ready]
 
     def _close(self):
         state = self._state
-        last = state.previous
-        frames = state.pending + ([last] if last is not None else [])
+        chain = [*state.pending, state.previous] if state.previous is not None else []
         state.pending = []
-        results = [self._result(f) for f in frames if f is not last]
-        if last is not None:
-            results.append(self._last_result(last))
-        return results
+        return [self._result(f, after) for f, after in zip(chain, [*chain[1:], None], strict=True)]
 
     # ------------------------------------------------------------------ one pair
     def _pair_estimator(self):
@@ -422,6 +434,28 @@ class SequenceRegistration(BaseEstimator):
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
         self._confirm_and_end(previous, seen)
+        self._carry(previous, frame)
+
+    def _carry(self, previous, frame):
+        """Where each track seen in ``previous`` lands in ``frame``: the points of the
+        second sweep within two of its spacings (and a twentieth of tau) of the track's
+        points moved by its motion. They are the track's in ``frame`` where the next pair
+        does not say otherwise (it may miss the object, or there may be no next pair)."""
+        points, tree, normals = frame.target()
+        frame.carried = np.full(len(points), -1, dtype=np.intp)
+        free = ~frame.body
+        for key, motion in previous.motions.items():
+            moved = transform(motion, previous.returns[previous.track_of == key])
+            near = near_points(points, moved, _TIGHT * self.tau, np.flatnonzero(free))
+            if not len(near):
+                continue
+            distance, _ = cKDTree(moved).query(points[near])
+            near = near[distance <= EXPLAINED_SPACINGS * normals.spacing(near)]
+            frame.carried[near] = key
+            free[near] = False
+            track = next((t for t in self._state.tracks if t.key == key), None)
+            if track is not None:
+                frame.carried_twists[key] = (track.omega.copy(), track.velocity.copy())
 
     def _fit_pair(self, previous, frame, dt):
         """Register the two sweeps; the first sweep's labels, flow, body and ground, and
@@ -431,6 +465,13 @@ class SequenceRegistration(BaseEstimator):
         first, second = previous.returns, frame.returns
         estimator = self._pair_estimator()
         kwargs = {} if start is None else {"ego_motion": (start[:3, :3], start[:3, 3])}
+        parameters = _fit_parameters(estimator)
+        if frame.seconds and "interval" in parameters:
+            kwargs["interval"] = dt  # bounds the objects' motions by what road users do
+        if "ego_body" in parameters and previous.body is not None and previous.body.any():
+            # The ego vehicle's body is fixed in the sensor's frame: found once, it is
+            # the next sweep's points where the last sweep's body points were.
+            kwargs["ego_body"] = (previous.body, self._carried_body(previous, second))
         pair = estimator.fit(first, sweep=second, **kwargs)
         ego = to_matrix(*pair.ego_motion_)
         state.last_ego = (ego, dt)
@@ -457,6 +498,19 @@ class SequenceRegistration(BaseEstimator):
             ground=_mask(getattr(pair, "ground_mask_", None), len(first)),
             detections=detections,
         )
+
+    def _carried_body(self, previous, points):
+        """The points of a sweep within the body's matching distance of where the last
+        sweep's body points were, in the same sensor coordinates."""
+        body = previous.returns[previous.body]
+        near = np.linalg.norm(points, axis=1) <= _BODY_REACH * self.tau
+        carried = np.zeros(len(points), dtype=bool)
+        if near.any():
+            distance, _ = cKDTree(body).query(
+                points[near], distance_upper_bound=_BODY_MATCH * self.tau
+            )
+            carried[near] = np.isfinite(distance)
+        return carried
 
     def _predict(self, time, pose):
         """Every track's points predicted to ``time``, in the sensor frame at ``pose``,
@@ -607,29 +661,34 @@ class SequenceRegistration(BaseEstimator):
         return 12
 
     # ------------------------------------------------------------------ results
-    def _result(self, frame):
+    def _result(self, frame, after=None):
+        """Frame ``frame``'s final labels, moving flags, flow and table rows.
+
+        A point is a confirmed track's where the pair of which ``frame`` is the first
+        sweep gave it to the track, else where the pair before carried the track onto it
+        (:meth:`_carry`). ``after`` is the next frame (None for the last one: no flow).
+        """
         identity = self._state.identity
-        n = len(frame.points)
-        labels = np.full(n, -1, dtype=np.intp)
-        valid_labels = np.where(frame.pair_labels >= 0, 0, -1)
-        keys = frame.track_of
-        ids = (
-            np.array([identity.get(int(k), 0) for k in keys], dtype=np.intp) if len(keys) else keys
-        )
-        valid_labels = np.where(ids > 0, ids, valid_labels)
-        valid_labels[frame.body] = -1
+        n_valid = int(frame.valid.sum())
+
+        def ids(keys):
+            if keys is None:
+                return np.zeros(n_valid, dtype=np.intp)
+            return np.array([identity.get(int(k), 0) for k in keys], dtype=np.intp).reshape(-1)
+
+        own, carried = ids(frame.track_of), ids(frame.carried)
+        if frame.pair_labels is not None:
+            valid_labels = np.where(frame.pair_labels >= 0, 0, -1)
+        else:
+            valid_labels = np.zeros(n_valid, dtype=np.intp)
+        valid_labels = np.where(own > 0, own, np.where(carried > 0, carried, valid_labels))
+        if frame.body is not None:
+            valid_labels[frame.body] = -1
+        labels = np.full(len(frame.points), -1, dtype=np.intp)
         labels[frame.valid] = valid_labels
-        moving = labels > 0
-        flow = np.full((n, 3), np.nan)
-        valid_flow = frame.pair_flow.copy()
-        first = frame.returns
-        for key, motion in frame.motions.items():
-            rows = keys == key
-            if identity.get(key, 0) > 0:
-                valid_flow[rows] = transform(motion, first[rows]) - first[rows]
-            else:  # a ghost moves with the static world
-                valid_flow[rows] = transform(frame.ego, first[rows]) - first[rows]
-        flow[frame.valid] = valid_flow
+        flow = np.full((len(frame.points), 3), np.nan)
+        if after is not None:
+            flow[frame.valid] = self._flow(frame, after, own, carried)
         rows = [r for r in frame.rows if identity.get(r["key"], 0) > 0]
         for r in rows:
             r["track"] = identity[r["key"]]
@@ -637,40 +696,34 @@ class SequenceRegistration(BaseEstimator):
             index=frame.index,
             time=frame.time,
             labels=labels,
-            moving=moving,
+            moving=labels > 0,
             flow=flow,
             pose=frame.pose,
             tracks=self._table(rows),
         )
 
-    def _last_result(self, frame):
-        """The last frame: the confirmed tracks' points of the frame before, moved on."""
-        state = self._state
-        n = len(frame.points)
-        labels = np.full(n, -1, dtype=np.intp)
-        valid_labels = np.zeros(int(frame.valid.sum()), dtype=np.intp)
-        before = state.last_first
-        points = frame.returns
-        if before is not None and before.track_of is not None:
-            for key, motion in before.motions.items():
-                identity = state.identity.get(key, 0)
-                if identity <= 0:
-                    continue
-                moved = transform(motion, before.returns[before.track_of == key])
-                near = near_points(points, moved, _NEAR * self.tau * 0.5)
-                valid_labels[near] = identity
-        if frame.body is not None:
-            valid_labels[frame.body] = -1
-        labels[frame.valid] = valid_labels
-        return Bunch(
-            index=frame.index,
-            time=frame.time,
-            labels=labels,
-            moving=labels > 0,
-            flow=np.full((n, 3), np.nan),
-            pose=frame.pose,
-            tracks=self._table([]),
-        )
+    def _flow(self, frame, after, own, carried):
+        """The flow of ``frame``'s valid rows to ``after``: the pair's, a confirmed track's
+        own motion on its points, and for a track carried onto points the pair missed,
+        its last twist (constant velocity)."""
+        identity = self._state.identity
+        first = frame.returns
+        flow = frame.pair_flow.copy()
+        for key, motion in frame.motions.items():
+            rows = frame.track_of == key
+            # A ghost, never confirmed, moves with the static world.
+            moved = motion if identity.get(key, 0) > 0 else frame.ego
+            flow[rows] = transform(moved, first[rows]) - first[rows]
+        for key, (omega, velocity) in frame.carried_twists.items():
+            rows = (frame.carried == key) & (own <= 0) & (carried > 0)
+            if not rows.any():
+                continue
+            world = transform(frame.pose, first[rows])
+            dt = after.time - frame.time
+            motion = predicted_motion(omega, velocity, world.mean(axis=0), dt)
+            moved = compose(inverse(after.pose), motion, frame.pose)
+            flow[rows] = transform(moved, first[rows]) - first[rows]
+        return flow
 
     @staticmethod
     def _table(rows):
@@ -706,6 +759,11 @@ class _Pair:
     scale: float  # the ego ICP's robust residual scale
     ground: np.ndarray  # the first sweep's ground (valid rows)
     detections: dict  # moving cluster -> (rows, 4 x 4 motion)
+
+
+def _fit_parameters(estimator):
+    """The keyword parameters of ``estimator.fit``."""
+    return set(inspect.signature(estimator.fit).parameters)
 
 
 def _mask(values, n):

@@ -655,6 +655,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         ground=None,
         sweep_ground=None,
         ego_motion=None,
+        ego_body=None,
     ):
         """Find the objects and their motions, refined on the second sweep.
 
@@ -692,6 +693,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             it on the sweeps (so it should be within ``tau / 5`` of the truth). None: the
             ego motion is found from the identity, up to ``max(tau, max_displacement)``
             away (5 m with ``tau=5``: 2 Hz keyframes at 36 km/h).
+        ego_body : tuple of two array-like of bool, or None
+            Raw mode: the ego vehicle's body in each sweep, known (a log's, carried from
+            the last pair: it is fixed in the sensor's frame), ``(n_samples,)`` and
+            ``(m,)``. Its points are left out as found ones are, and the search for them
+            is skipped. None: found from the sweeps.
 
         Returns
         -------
@@ -727,9 +733,27 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                         f"other {self.n_sweep_invalid_} are NaN or at the origin); at least "
                         f"{_MIN_SWEEP_POINTS} are needed."
                     )
+        if ego_body is not None:
+            if sweep is None or X.shape[1] != 3 or len(ego_body) != 2:
+                raise ValueError(
+                    "ego_body goes with two raw sweeps: fit(points1, sweep=points2, "
+                    "ego_body=(mask1, mask2))."
+                )
+            ego_body = (
+                _check_mask(ego_body[0], len(X), "ego_body[0]"),
+                _check_mask(ego_body[1], len(sweep), "ego_body[1]"),
+            )
         if not self.n_invalid_ and not self.n_sweep_invalid_:
             return self._fit(
-                X, sweep, times, sweep_times, interval, ground, sweep_ground, ego_motion
+                X,
+                sweep,
+                times,
+                sweep_times,
+                interval,
+                ground,
+                sweep_ground,
+                ego_motion,
+                body=ego_body,
             )
         # Invalid returns (NaN padding, a driver's failed returns at the origin) are no
         # measurement: the fit leaves them out and they come back as outliers.
@@ -759,6 +783,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             rows(ground, keep, "ground"),
             rows(sweep_ground, keep_sweep, "sweep_ground"),
             ego_motion,
+            body=None if ego_body is None else (ego_body[0][keep], ego_body[1][keep_sweep]),
         )
         # Invalid returns: no flow (NaN), in no cluster.
         self._restore_rows(keep, keep_sweep, np.nan)
@@ -797,6 +822,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sweep_ground,
         known=None,
         find_body=True,
+        body=None,
     ):
         """``fit`` on valid rows: ``X`` validated, invalid returns of both sweeps left out."""
         self.n_ego_body_ = 0
@@ -859,12 +885,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             self.n_rounds_ = 1
         else:
             masks = self._ground_masks(a, sweep, ground, sweep_ground)
-            if find_body:
+            if body is not None:  # known (a log's): no search
+                body = (*body, known) if body[0].any() or body[1].any() else None
+            elif find_body:
                 body = self._ego_body(a, sweep, masks, known)
-                if body is not None:
-                    return self._fit_without_body(
-                        X, sweep, (times, sweep_times, interval), masks, body
-                    )
+            if body is not None:
+                return self._fit_without_body(X, sweep, (times, sweep_times, interval), masks, body)
             labels, estimator, rotations, translations, scales, sigmas, static = (
                 self._raw_with_ground(a, context, masks, known)
             )
