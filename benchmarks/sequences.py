@@ -1,0 +1,280 @@
+"""Whole logs: SequenceRegistration against each pair judged alone, and KISS-ICP's time.
+
+    pip install -e ".[bench]"                 # kiss-icp, for the time per frame floor
+    python benchmarks/sequences.py --data DIR # DIR holds scene-0004/, scene-0006/
+
+The logs:
+
+* the shared nuScenes logs (2 Hz keyframes, HDL-32E, per-point moving labels and boxes, in
+  the SemanticKITTI layout: ``velodyne/``, ``labels/`` (uint8: moving = 32-39, 31 the ego
+  car's body), ``boundingbox/``, ``poses.txt``), read through
+  :func:`mmreg.datasets.open_sequence` as a user's folder is. Extract them first:
+  ``tar xJf ../shared/realdata/nuscenes_sequences/scene-0004.tar.xz -C DIR``. Never commit
+  them;
+* generated logs (:func:`mmreg.datasets.make_lidar_sequence`, 20 frames of 32 x 1024 rays,
+  at 10 Hz and 2 Hz, seeds 0 and 1): cars cruising, braking and passing, walkers, cyclists,
+  parked cars, with every object's id in every frame.
+
+For each log, ``SequenceRegistration(random_state=0)`` (times from the log) and, with
+``--pairs``, ``SweepRegistration(random_state=0)`` on every pair alone (its moving
+clusters, frame k's labels from pair (k, k+1); the last frame has none). Columns:
+
+* ``MOS IoU``: the moving points' IoU (LiDAR-MOS, :func:`mmreg.metrics.moving_iou`), the
+  ego car's body left out; ``IoU > 0.5 m/s``: the same with the points of objects moving
+  slower than 0.5 m/s left out (nuScenes' "moving" is the annotators' attribute: a car
+  waiting at a light is "moving"; no motion can show it);
+* ``found``: object-frames in which one track (or, for pairs, one cluster) holds at least
+  half of a moving object's points, of all (:func:`mmreg.metrics.tracking_scores`);
+  ``found >= 50``: the same for objects of 50 points or more in that frame;
+* ``false/frame``: tracks or clusters called moving of which less than half the points
+  move, per frame; ``ID sw``: identity switches (CLEAR-MOT);
+* ``s/frame``: wall seconds per frame of the fit (the machine is shared: the load average
+  is in the header); ``KISS-ICP``: its odometry's seconds per frame on the same frames
+  (``benchmarks/kiss_odometry.py``'s settings, one thread); ``x KISS``: the ratio;
+* ``RPE``: the ego motion's relative pose error against the log's poses (m).
+
+nuScenes boxes carry no track id: the truth's object ids are made by chaining boxes of
+one class and size whose world centres are within 4 m from frame to frame.
+
+Writes benchmarks/results/sequences.md and .csv.
+"""
+
+import argparse
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mmreg import SequenceRegistration, SweepRegistration
+from mmreg.datasets import make_lidar_sequence, open_sequence
+from mmreg.io import moving_from_labels, read_semantickitti_labels
+from mmreg.metrics import moving_iou, tracking_scores
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+NUSCENES = ("scene-0004", "scene-0006")
+SLOW = 0.5  # m/s: slower objects are left out of "IoU > 0.5 m/s"
+MIN_POINTS = 50
+
+
+# --------------------------------------------------------------------------- logs
+def _in_box(points, box):
+    cx, cy, cz, length, width, height, yaw = box
+    c, s = np.cos(yaw), np.sin(yaw)
+    d = points - [cx, cy, cz]
+    along, across = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    return (
+        (np.abs(along) <= length / 2)
+        & (np.abs(across) <= width / 2)
+        & (np.abs(d[:, 2]) <= height / 2)
+    )
+
+
+def nuscenes_log(folder):
+    """Frames, times, poses and the truth of a SemanticKITTI-layout nuScenes log."""
+    with warnings.catch_warnings():  # poses.txt without calib.txt: the LiDAR's own poses
+        warnings.simplefilter("ignore")
+        sequence = open_sequence(folder)
+        poses = sequence.poses
+    frames = [frame.points for frame in sequence]
+    moving, ignore, ids, speeds = [], [], [], []
+    previous, next_id = [], 1
+    for k, points in enumerate(frames):
+        name = Path(sequence.names[k]).stem
+        labels = read_semantickitti_labels(folder / "labels" / f"{name}.label", len(points))
+        move, skip = moving_from_labels(labels.semantic, labels.convention)
+        moving.append(move)
+        ignore.append(skip)
+        boxes = np.load(folder / "boundingbox" / f"{name}.npy", allow_pickle=True)
+        object_ids = np.zeros(len(points), dtype=np.int64)
+        current = []
+        for row in boxes:
+            box = np.asarray(row[3], dtype=float)
+            centre = poses[k][:3, :3] @ box[:3] + poses[k][:3, 3]
+            match, gap = None, 4.0
+            for other, name_, size, where in previous:
+                if name_ == row[0] and np.abs(size - box[3:6]).max() < 0.05:
+                    distance = np.linalg.norm(where - centre)
+                    if distance < gap:
+                        match, gap = other, distance
+            if match is None:
+                match, next_id = next_id, next_id + 1
+            current.append((match, row[0], box[3:6], centre))
+            object_ids[_in_box(points, box) & move] = match
+        previous = current
+        ids.append(object_ids)
+    times = np.arange(len(frames)) / 2.0 if sequence.timestamps is None else sequence.timestamps
+    speeds = _speeds(ids, frames, poses, times)
+    return dict(
+        frames=frames,
+        times=times,
+        poses=poses,
+        moving=moving,
+        ignore=ignore,
+        ids=ids,
+        speeds=speeds,
+    )
+
+
+def _speeds(ids, frames, poses, times):
+    """Per frame, per point: its object's speed (m/s) from its centroid to the next (or
+    last) frame's, NaN where it has no object."""
+    out = []
+    for k, object_ids in enumerate(ids):
+        speed = np.full(len(object_ids), np.nan)
+        other = k + 1 if k + 1 < len(ids) else k - 1
+        for i in np.unique(object_ids[object_ids > 0]):
+            here, there = object_ids == i, ids[other] == i
+            if not there.any():
+                continue
+            a = frames[k][here] @ poses[k][:3, :3].T + poses[k][:3, 3]
+            b = frames[other][there] @ poses[other][:3, :3].T + poses[other][:3, 3]
+            speed[here] = np.linalg.norm(b.mean(0) - a.mean(0)) / abs(times[other] - times[k])
+        out.append(speed)
+    return out
+
+
+def generated_log(frame_rate, seed):
+    log = make_lidar_sequence(20, frame_rate=frame_rate, random_state=seed)
+    ids = [np.where(m, labels, 0) for labels, m in zip(log.labels, log.moving, strict=True)]
+    speeds = []
+    for k, labels in enumerate(log.labels):
+        table = log.objects[log.objects.frame == k].set_index("id")["speed"]
+        speeds.append(np.array([table.get(i, np.nan) if i > 0 else np.nan for i in labels]))
+    return dict(
+        frames=log.frames,
+        times=log.times,
+        poses=log.poses,
+        moving=log.moving,
+        ignore=[np.zeros(len(f), bool) for f in log.frames],
+        ids=ids,
+        speeds=speeds,
+    )
+
+
+# --------------------------------------------------------------------------- scores
+def scores(log, labels, moving, seconds):
+    """The row's figures for predicted per-frame ``labels`` and ``moving`` masks."""
+    fast_ignore = [
+        skip | (np.nan_to_num(speed, nan=np.inf) < SLOW)
+        for skip, speed in zip(log["ignore"], log["speeds"], strict=True)
+    ]
+    predicted = [np.where(m & (lab > 0), lab, 0) for lab, m in zip(labels, moving, strict=True)]
+    tracking = tracking_scores(log["ids"], predicted, ignore=log["ignore"])
+    summary = tracking.summary()
+    big = [np.where(np.bincount(ids)[ids] >= MIN_POINTS, ids, 0) for ids in log["ids"]]
+    tracking_big = tracking_scores(big, predicted, ignore=log["ignore"])
+    return {
+        "MOS IoU": moving_iou(log["moving"], moving, ignore=log["ignore"]),
+        "IoU > 0.5 m/s": moving_iou(log["moving"], moving, ignore=fast_ignore),
+        "found": f"{int(tracking.found.sum())}/{int(tracking.visible.sum())}",
+        "found >= 50": f"{int(tracking_big.found.sum())}/{int(tracking_big.visible.sum())}",
+        "false/frame": summary["false_tracks_per_frame"],
+        "ID sw": summary["id_switches"],
+        "s/frame": seconds,
+    }
+
+
+def run_sequence(log):
+    start = time.perf_counter()
+    est = SequenceRegistration(random_state=0).fit(log["frames"], times=log["times"])
+    seconds = (time.perf_counter() - start) / len(log["frames"])
+    row = scores(log, est.labels_, est.moving_, seconds)
+    truth = log["poses"]
+    errors = [
+        np.linalg.norm(
+            (np.linalg.inv(truth[k + 1]) @ truth[k])[:3, 3]
+            - (np.linalg.inv(est.ego_poses_[k + 1]) @ est.ego_poses_[k])[:3, 3]
+        )
+        for k in range(len(truth) - 1)
+    ]
+    row["RPE m"] = float(np.mean(errors))
+    row["tracks"] = est.n_tracks_
+    return row
+
+
+def run_pairs(log):
+    """Each pair judged alone: frame k labelled by pair (k, k + 1); the last frame not."""
+    frames = log["frames"]
+    labels, moving = [], []
+    start = time.perf_counter()
+    for k in range(len(frames) - 1):
+        pair = SweepRegistration(random_state=0).fit(frames[k], sweep=frames[k + 1])
+        lab = np.asarray(pair.labels_)
+        move = (lab >= 0) & np.asarray(pair.moving_)[np.maximum(lab, 0)]
+        labels.append(np.where(move, lab + 1, 0))
+        moving.append(move)
+    seconds = (time.perf_counter() - start) / (len(frames) - 1)
+    labels.append(np.zeros(len(frames[-1]), np.intp))
+    moving.append(np.zeros(len(frames[-1]), bool))
+    # Ids are per pair: no identity over time; ID switches are not meaningful.
+    row = scores(log, labels, moving, seconds)
+    row["ID sw"] = "-"
+    return row
+
+
+def kiss_seconds(log):
+    try:
+        from kiss_odometry import kiss_icp_odometry
+    except ImportError:
+        return np.nan
+    try:
+        result = kiss_icp_odometry(log["frames"], max_num_threads=1)
+    except ImportError:  # kiss-icp not installed
+        return np.nan
+    return float(np.mean(result.wall_s))
+
+
+# --------------------------------------------------------------------------- main
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default="/work/data", help="folder of the nuScenes logs")
+    parser.add_argument("--pairs", action="store_true", help="also each pair alone")
+    parser.add_argument("--generated", default="10:0,10:1,2:0,2:1", help="rate:seed,...")
+    parser.add_argument("--out", default=str(HERE / "results" / "sequences"))
+    args = parser.parse_args(argv)
+    logs = []
+    for name in NUSCENES:
+        folder = Path(args.data) / name
+        if folder.is_dir():
+            logs.append((f"nuScenes {name}", nuscenes_log(folder)))
+        else:
+            print(f"{folder}: absent, skipped", flush=True)
+    for item in filter(None, args.generated.split(",")):
+        rate, seed = item.split(":")
+        logs.append((f"generated {rate} Hz, seed {seed}", generated_log(float(rate), int(seed))))
+    header = (
+        f"load average at start: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs), "
+        f"python {sys.version.split()[0]}, numpy {np.__version__}"
+    )
+    print(header, flush=True)
+    rows = []
+    for name, log in logs:
+        kiss = kiss_seconds(log)
+        row = {"log": name, "method": "SequenceRegistration", **run_sequence(log)}
+        row["KISS-ICP s/frame"] = kiss
+        row["x KISS"] = row["s/frame"] / kiss if kiss == kiss else np.nan
+        rows.append(row)
+        print(row, flush=True)
+        if args.pairs:
+            pair_row = {"log": name, "method": "pairs alone", **run_pairs(log)}
+            rows.append(pair_row)
+            print(pair_row, flush=True)
+    table = pd.DataFrame(rows)
+    table.to_csv(f"{args.out}.csv", index=False)
+    command = "python benchmarks/sequences.py " + " ".join(
+        argv if argv is not None else sys.argv[1:]
+    )
+    Path(f"{args.out}.md").write_text(
+        f"# Whole logs: tracks against pairs alone\n\n`{command.strip()}`\n\n{header}\n\n"
+        + table.to_markdown(index=False, floatfmt=".3f")
+        + "\n"
+    )
+
+
+if __name__ == "__main__":
+    main()
