@@ -1,11 +1,11 @@
 """``mmreg run``: process a whole dataset as independent jobs on Dask (resumable)."""
 
+import argparse
 import contextlib
 import hashlib
 import importlib.util
 import json
 import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -180,11 +180,31 @@ def add_arguments(parser):
     parser.add_argument("--layout", choices=LAYOUTS, default="auto", help="what DATASET holds")
     parser.add_argument(
         "--pairs",
-        choices=PAIRS,
-        default="auto",
-        help="what a job fits: 'sweeps', two raw sweeps (the default for LiDAR logs and "
-        "frames); 'truth', an Argoverse 2 log's ground-truth flow (the fit sees the "
-        "answer); 'aligned', index-aligned frames; see above",
+        nargs="?",
+        const="auto",
+        default=None,
+        type=_pairs,
+        metavar="{" + ",".join(PAIRS) + "}",
+        help="per-pair jobs instead of the sequence estimator: 'sweeps' (also bare --pairs "
+        "or 'auto'), two raw sweeps; 'truth', an Argoverse 2 log's ground-truth flow (the "
+        "fit sees the answer); 'aligned', index-aligned frames; see above (default: the "
+        "sequence estimator on LiDAR logs and frames, pairs for correspondence files)",
+    )
+    parser.add_argument(
+        "--frame-rate",
+        type=_frame_rate,
+        metavar="HZ",
+        default=None,
+        help="logs: frames per second, for velocities in m/s where the log has no times "
+        "(default: its times; without them, velocities per frame)",
+    )
+    parser.add_argument(
+        "--no-poses",
+        dest="poses",
+        action="store_false",
+        help="logs: do not start the ego motions from the log's poses (KITTI poses.txt, "
+        "Argoverse 2 ego poses); register from the points alone, so that 'mmreg evaluate' "
+        "compares the poses found with independent ones",
     )
     parser.add_argument(
         "--flow",
@@ -238,6 +258,25 @@ def add_arguments(parser):
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no table")
 
 
+def _pairs(text):
+    if text not in PAIRS:
+        raise argparse.ArgumentTypeError(
+            f"invalid choice: {text!r} (choose from {', '.join(PAIRS)}; a bare --pairs goes "
+            "after DATASET)"
+        )
+    return text
+
+
+def _frame_rate(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected frames per second; got {text!r}") from None
+    if not (0 < value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive number of Hz; got {text}")
+    return value
+
+
 def _configuration(args):
     """What the results in --out depend on (an earlier run resumes only if it matches)."""
     from mmreg import __version__
@@ -259,14 +298,10 @@ def _configuration(args):
 
 
 def _foreign(out):
-    """Names in ``out`` that an 'mmreg run' does not write."""
-    names = sorted(p.name for p in out.iterdir() if p.name not in RUN_FILES)
-    jobs = out / "jobs"
-    if jobs.exists() and not jobs.is_dir():
-        names.append("jobs")
-    elif jobs.is_dir():
-        names += [f"jobs/{p.name}" for p in jobs.iterdir() if p.suffix not in (".npz", ".tmp")]
-    return names
+    """Names in ``out`` that an 'mmreg run' (of pairs or of logs) does not write."""
+    from mmreg._cli._sequence_run import foreign_names
+
+    return foreign_names(out)
 
 
 def check_run_out(out, configuration, *, overwrite):
@@ -306,10 +341,12 @@ def check_run_out(out, configuration, *, overwrite):
 
 
 def _holds_results(out):
-    """Whether ``out`` holds a job's result (an earlier run whose jobs all failed does
-    not: it may be replaced by a run with other options, such as an error's advice)."""
-    jobs = Path(out) / "jobs"
-    return jobs.is_dir() and any(p.suffix == ".npz" for p in jobs.iterdir())
+    """Whether ``out`` holds a job's or a log's result (an earlier run whose jobs all
+    failed does not: it may be replaced by a run with other options, such as an error's
+    advice)."""
+    from mmreg._cli._sequence_run import holds_results
+
+    return holds_results(out)
 
 
 def _estimator(args, jobs):
@@ -356,6 +393,27 @@ def run(args):
     if args.out is None:
         args.out = default_out(args)
     out = Path(args.out)
+    if args.pairs is None and args.flow is None:  # a log, or a folder of logs?
+        from mmreg._cli._sequence_run import run_sequences
+        from mmreg.runner._logs import NotALogError, log_jobs
+
+        try:
+            with reading(args.dataset), _missing_reader(), option_words():
+                logs = log_jobs(
+                    args.dataset,
+                    layout=args.layout,
+                    topic=args.topic,
+                    pattern=args.pattern,
+                    poses=args.poses,
+                )
+        except CLIError as error:
+            if not isinstance(error.__cause__, NotALogError):
+                raise
+        else:
+            args.tau = resolve_tau(args.tau, True)
+            return run_sequences(args, logs)
+    if args.pairs is None:
+        args.pairs = "auto"
     # A listing: no job is loaded yet.
     with reading(args.dataset), _missing_reader(), option_words():
         jobs = dataset_jobs(
@@ -376,9 +434,10 @@ def run(args):
     resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
     try:
         if args.overwrite:  # only result files, checked above
-            for folder in ("jobs", "av2_scene_flow", "pictures"):
-                if (out / folder).is_dir():
-                    shutil.rmtree(out / folder)
+            from mmreg._cli._sequence_run import remove_results
+
+            if out.is_dir():
+                remove_results(out)
         out.mkdir(parents=True, exist_ok=True)
         record = {"configuration": configuration, "jobs": len(jobs)}
         with mmio.atomic_write(out / "run.json", "w") as handle:
