@@ -14,12 +14,47 @@ from mmreg._cli._common import CLIError, one_line, plural, reading
 from mmreg._cli.register import TAU_RULE, _positive_int, _seed, _tau, resolve_tau
 
 NAME = "run"
-HELP = "process a dataset (a folder of frames or files, Argoverse 2 logs) on Dask"
+HELP = "process LiDAR logs (tracks per log) or a dataset of pairs on Dask"
 DESCRIPTION = """\
-Run the registration on every job of DATASET, as independent tasks on a Dask cluster: a
-LocalCluster on this machine by default, or the one at --scheduler.
+Run the registration over DATASET as independent tasks on a Dask cluster: a LocalCluster
+on this machine by default, or the one at --scheduler.
 
-DATASET is one of
+A LiDAR log (a ROS bag, a KITTI or SemanticKITTI sequence, an Argoverse 2 log, a folder
+of frames) is registered by default as a whole by the sequence estimator
+(SequenceRegistration): every moving object is tracked from frame to frame with one id.
+A folder of logs (an Argoverse 2 split, KITTI's sequences/ or its root) runs one log per
+task. Written into --out (for a folder of logs, into --out/<log>/):
+  - labels/<frame>.label: one uint32 per row of every frame's file (rows that are no
+    return too, 0), the last frame included, as the LiDAR-MOS tools read them: lower
+    16 bits 251 moving, 9 static, 0 unlabelled (outliers, the ego vehicle's body, no
+    return); upper 16 bits the track id (0 for the static world);
+  - tracks.csv: one row per track and frame, in the log's frame (the first sensor
+    pose's): track, frame, time_s, the centroid x_m, y_m, z_m, the box length_m,
+    width_m, height_m, yaw_rad, the velocity vx_m_s, vy_m_s, vz_m_s, speed_m_s,
+    yaw_rate_rad_s, points; where the log has no times and --frame-rate is not given,
+    per frame: vx_m_frame, ..., yaw_rate_rad_frame;
+  - poses.txt: the sensor's pose of every frame in KITTI's format (the first the
+    identity), as evo reads it;
+  - frames.csv: one row per frame (its file, time, points, moving points and objects,
+    tracks, seconds);
+  - with --pictures, pictures/<frame>.png (every frame from above: moving points by
+    track id with the ids and trails, the static world grey) and pictures/animation.gif;
+  - Argoverse 2 logs also: av2_scene_flow/<log>/<timestamp_ns>.feather at the top of
+    --out, the flow of every point of each sweep but the last in the scene-flow
+    challenge's format (is_dynamic: the points of moving tracks);
+  - log.json (written last: a log is done once it is there) and run.json (the options
+    and the timings); for a folder of logs, summary.csv (one row per log).
+The log's poses (KITTI's poses.txt, Argoverse 2's ego poses) start each ego motion
+unless --no-poses. Run again after an interruption: a finished log whose files did not
+change is skipped. The console shows the tracks and the frames (moving objects, seconds
+per frame) of one log, a row per log of several; -q prints where the results went.
+'mmreg evaluate' and 'mmreg view' read the result.
+
+--pairs runs per-pair jobs instead, as below (also the default for a folder of
+correspondence files, and with --flow); --ground, --method, --max-iter and --tau set the
+sequence estimator's pair registration as theirs; --capture-times applies to pairs only.
+
+Per-pair jobs: DATASET is one of
   - an Argoverse 2 log (a folder with sensors/lidar; annotations.feather, the ego poses
     and map/ are used when there: the test split and the LiDAR dataset have no
     annotations), or a folder of logs (a split): one job per consecutive sweep pair (N
@@ -43,7 +78,7 @@ DATASET is one of
     file; an .npz may hold the truth too ('labels', 'flow'), then scored.
 
 --pairs says what a job fits:
-  - auto (default): sweeps for LiDAR logs and frames;
+  - auto (a bare --pairs): sweeps for LiDAR logs and frames;
   - sweeps: two raw sweeps of any sizes and orders, registered from the points alone:
     sweep k to sweep k+1 by SweepRegistration (ego motion and object motions by ICP,
     clusters by the --method variant);
@@ -106,6 +141,10 @@ path (a shared file system); the results come back to this machine.
 """
 EPILOG = """\
 examples:
+  mmreg run /data/kitti/dataset/sequences/08 --out kitti-08 --pictures
+  mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val-tracks
+  mmreg run scene-0006 --frame-rate 2 --out scene-0006   # nuScenes keyframes: 2 Hz
+  mmreg run /data/kitti/odometry/sequences/08 --pairs --out kitti-08-pairs
   mmreg run /data/av2/sensor/test/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --out test-0c6e
   mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val
   mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --flow zeroflow/val
@@ -140,7 +179,8 @@ def add_arguments(parser):
     parser.add_argument(
         "--pictures",
         action="store_true",
-        help="also draw every job's result (a LiDAR sweep from above) into OUT/pictures/",
+        help="also draw every frame of a log from above, and its animation (pairs: every "
+        "job's result) into OUT/pictures/",
     )
     parser.add_argument(
         "--out",

@@ -405,6 +405,25 @@ def fit_log(job, estimator, *, pictures=False, report=None):
         DataFrame, one row per frame), ``per_second`` (velocities per second),
         ``challenge`` (Argoverse 2: ``(relative path, flow, is_dynamic)`` per sweep but
         the last), ``pictures`` and ``animation`` (or None), ``row`` (the summary).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from mmreg import SequenceRegistration
+    >>> from mmreg.datasets import make_lidar_sequence
+    >>> from mmreg.runner import fit_log, log_jobs
+    >>> log = make_lidar_sequence(3, n_azimuths=128, random_state=0)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     for k, frame in enumerate(log.frames):
+    ...         np.save(Path(folder) / f"scan{k}.npy", frame)
+    ...     (job,) = log_jobs(folder)
+    ...     result = fit_log(job, SequenceRegistration(random_state=0))
+    >>> result["names"], [len(raw) for raw in result["labels"]] == [len(f) for f in log.frames]
+    (['scan0', 'scan1', 'scan2'], True)
+    >>> bool(np.allclose(result["poses"][0], np.eye(4)))
+    True
     """
     import pandas as pd
     from sklearn.base import clone
@@ -753,6 +772,27 @@ def run_logs(
         seconds per frame), ``points_per_frame``, ``load_s``, ``fit_s``,
         ``velocity_unit``, ``poses_given``, ``resumed``, ``error``, ``warnings``,
         ``changed_input`` (a log run again because that file changed).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from distributed import LocalCluster
+    >>> from mmreg import SequenceRegistration
+    >>> from mmreg.datasets import make_lidar_sequence
+    >>> from mmreg.runner import log_jobs, run_logs
+    >>> log = make_lidar_sequence(3, n_azimuths=128, random_state=0)
+    >>> with tempfile.TemporaryDirectory() as folder, LocalCluster(
+    ...         n_workers=1, processes=False, dashboard_address=":0") as cluster:
+    ...     for k, frame in enumerate(log.frames):
+    ...         np.save(Path(folder) / f"scan{k}.npy", frame)
+    ...     summary = run_logs(log_jobs(folder), SequenceRegistration(random_state=0),
+    ...                        Path(folder) / "out", scheduler=cluster.scheduler_address,
+    ...                        progress=False)
+    ...     labels = sorted(p.name for p in (Path(folder) / "out" / "labels").iterdir())
+    >>> summary[["status", "frames"]].values.tolist(), labels
+    ([['done', 3]], ['scan0.label', 'scan1.label', 'scan2.label'])
     """
     import pandas as pd
     from tqdm import tqdm
@@ -839,6 +879,9 @@ def _run_on(client, todo, estimator, pictures, bar, out, folders, fingerprints, 
         if result is not None:
             job = by_name[name]
             _write_log(folders[name], out, job, result, row, fingerprints[name], stamps[name])
+        else:  # an earlier result of this log is of other inputs: no longer its result
+            with contextlib.suppress(OSError):
+                (folders[name] / LOG_RECORD).unlink()
         rows[name] = row | {"resumed": False}
         future.release()
         _interrupt.check()
