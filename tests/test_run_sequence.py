@@ -3,6 +3,7 @@ every row of every frame, tracks.csv, poses.txt, pictures, the Argoverse 2 chall
 files), a folder of logs resumed log by log, --pairs keeping the pair jobs, and
 ``mmreg evaluate`` and ``mmreg view`` on the result."""
 
+import contextlib
 import io
 import json
 import os
@@ -67,8 +68,6 @@ def written(tmp_path_factory, scheduler):
     log = _log()
     scans = write_semantickitti(root / "08", log)
     out = root / "out"
-    import contextlib
-
     buffer = io.StringIO()
     with contextlib.redirect_stdout(buffer):
         code = main(["run", str(root / "08"), "--out", str(out), "--scheduler", scheduler, "-q"])
@@ -278,3 +277,51 @@ def test_an_argoverse2_log_keeps_the_challenge_files(tmp_path, scheduler):
         np.testing.assert_array_equal(table["is_dynamic"], labels.semantic == 251)
     # Argoverse 2 has times: velocities per second.
     assert "speed_m_s" in pd.read_csv(out / "tracks.csv")
+
+
+def test_nuscenes_labels_leave_the_ego_body_out_and_no_poses_is_independent(
+    tmp_path, scheduler, capsys
+):
+    """One-byte labels (a nuScenes conversion: 31 the ego body, 32 and up moving) are
+    scored with the body left out; --no-poses registers from the points alone."""
+    log = _log(3)
+    folder = tmp_path / "scene"
+    scans = write_semantickitti(folder, log)
+    rng = np.random.default_rng(0)
+    truth, ignore = [], []
+    for k, scan in enumerate(scans):
+        moving = np.r_[log.moving[k], np.zeros(N_INVALID, bool)]
+        body = ~moving & (rng.random(len(scan)) < 0.05)  # some points are the "body"
+        values = np.where(moving, 35, np.where(body, 31, 24)).astype(np.uint8)
+        values.tofile(folder / "labels" / f"{k:06d}.label")
+        truth.append(moving)
+        ignore.append(body)
+    out = tmp_path / "out"
+    command = ["run", str(folder), "--no-poses", "--out", str(out), "--scheduler", scheduler]
+    assert main([*command, "-q"]) == 0
+    record = json.loads((out / "log.json").read_text())
+    assert record["row"]["poses_given"] is False
+    pred = [
+        read_semantickitti_labels(out / "labels" / f"{k:06d}.label").semantic == 251
+        for k in range(3)
+    ]
+
+    capsys.readouterr()
+    assert main(["evaluate", str(out), "--json"]) == 0
+    scores = json.loads(capsys.readouterr().out)
+    assert scores["mos_iou"] == pytest.approx(moving_iou(truth, pred, ignore=ignore))
+    assert scores["poses_given"] is False and scores["rpe_m_max"] >= 0
+    assert "objects_true" not in scores  # one byte a point: no instance ids
+
+
+def test_a_log_of_a_folder_that_cannot_be_read_fails_alone(tmp_path, scheduler, capsys):
+    root = tmp_path / "sequences"
+    write_semantickitti(root / "00", _log(2))
+    (root / "01" / "velodyne").mkdir(parents=True)  # no scan at all
+    out = tmp_path / "out"
+    assert main(["run", str(root), "--out", str(out), "--scheduler", scheduler, "-q"]) == 1
+    assert "1 log failed, e.g. 01" in capsys.readouterr().err
+    summary = pd.read_csv(out / "summary.csv", dtype={"log": str})
+    assert summary["status"].tolist() == ["done", "error"]
+    assert "no .bin scans" in summary.loc[1, "error"]
+    assert (out / "00" / "log.json").is_file() and not (out / "01").exists()
