@@ -186,7 +186,7 @@ def test_all_zero_offsets_are_no_times(tmp_path):
 
 
 def test_mmreg_run_passes_the_times_unless_told_not_to(log, scheduler, tmp_path, capsys):
-    common = ["run", str(log), "--ground", "drop", "--scheduler", scheduler, "-q"]
+    common = ["run", str(log), "--pairs", "--ground", "drop", "--scheduler", scheduler, "-q"]
     assert main([*common, "--out", str(tmp_path / "with")]) == 0
     assert main([*common, "--out", str(tmp_path / "without"), "--no-capture-times"]) == 0
     with_times = pd.read_csv(tmp_path / "with" / "summary.csv")

@@ -55,7 +55,8 @@ def test_a_folder_of_equal_size_frames_is_registered_as_sweeps(tmp_path, schedul
     jobs = dataset_jobs(folder)
     assert [type(job) for job in jobs] == [SweepPairJob]
     out = tmp_path / "out"
-    assert main(["run", str(folder), "--out", str(out), "--scheduler", scheduler, "-q"]) == 0
+    command = ["run", str(folder), "--pairs", "--out", str(out), "--scheduler", scheduler]
+    assert main([*command, "-q"]) == 0
     summary = pd.read_csv(out / "summary.csv")
     assert summary["pairs"].tolist() == ["sweeps"] and summary["n_sweep"].tolist() == [len(b)]
     arrays, _ = read_job_result(out / "jobs" / "000000__000001.npz")
@@ -116,10 +117,12 @@ def test_aligned_stacked_scans_fail_and_the_advice_reuses_the_out(tmp_path, sche
     assert main([*command, "--pairs", "aligned"]) == 1
     error = capsys.readouterr().err
     assert "stacked row by row" in error and "drop --pairs aligned" in error
-    # Following the advice into the same --out: the failed run is replaced.
+    # Following the advice into the same --out: the failed run is replaced (by the
+    # sequence estimator on the two frames, as raw sweeps).
     assert main(command) == 0
-    assert json.loads((out / "run.json").read_text())["configuration"]["pairs"] == "auto"
-    assert pd.read_csv(out / "summary.csv")["status"].tolist() == ["done"]
+    assert json.loads((out / "run.json").read_text())["configuration"]["kind"] == "logs"
+    assert sorted(p.name for p in (out / "labels").iterdir()) == ["000000.label", "000001.label"]
+    assert not (out / "jobs").exists()
     # A run with results is still guarded.
     assert main([*command, "--pairs", "aligned"]) == 2
     assert "--overwrite" in capsys.readouterr().err
@@ -160,7 +163,7 @@ def test_a_folder_mixing_sweep_files_and_clouds_names_pattern(tmp_path, schedule
     with pytest.raises(ValueError, match=r"2 \.bin, 1 \.pcd.*pattern='\*\.bin'"):
         dataset_jobs(folder)  # the .bin files were left out without a word
     out = tmp_path / "out"
-    command = ["run", str(folder), "--out", str(out), "--scheduler", scheduler, "-q"]
+    command = ["run", str(folder), "--pairs", "--out", str(out), "--scheduler", scheduler, "-q"]
     assert main(command) == 2
     error = capsys.readouterr().err
     assert "--pattern '*.bin'" in error and "pattern=" not in error

@@ -47,7 +47,7 @@ def test_ground_in_run_means_what_it_means_in_register(tmp_path, scheduler, grou
     sequence = write_sequence(tmp_path / "00", [scene.a, scene.sweep])
     a, sweep = (p.astype(np.float32).astype(float) for p in (scene.a, scene.sweep))  # as read
     out = tmp_path / "out"
-    command = ["run", str(sequence), "--out", str(out), "--scheduler", scheduler, "-q"]
+    command = ["run", str(sequence), "--pairs", "--out", str(out), "--scheduler", scheduler, "-q"]
     assert main([*command, "--ground", ground]) == 0
     # The frames' times (times.txt, 0.1 s apart) bound the objects' motions.
     expected = sweep_estimator(ground=ground).fit(a, sweep=sweep, interval=0.1)
@@ -93,7 +93,15 @@ def test_a_semantickitti_folder_with_lidar_poses_and_no_calib(tmp_path, schedule
     motion = json.loads((out / "motions.json").read_text())
     static = max(motion, key=lambda m: m["size"])
     np.testing.assert_allclose(static["translation"], scene.transforms[0][:3, 3], atol=0.05)
-    command = ["run", str(sequence), "--out", str(tmp_path / "run"), "--scheduler", scheduler]
+    command = [
+        "run",
+        str(sequence),
+        "--pairs",
+        "--out",
+        str(tmp_path / "run"),
+        "--scheduler",
+        scheduler,
+    ]
     assert main([*command, "-q"]) == 0
     summary = pd.read_csv(tmp_path / "run" / "summary.csv")
     assert summary["status"].tolist() == ["done"]
@@ -145,7 +153,9 @@ def test_a_folder_of_kitti_sequences_runs_every_sequence(tmp_path, scheduler, ca
     names = ["00_000000", "00_000001", "01_000000", "02"]
     assert [job.name for job in jobs] == names
     out = tmp_path / "out"
-    assert main(["run", str(path), "--out", str(out), "--scheduler", scheduler, "-q"]) == 1
+    assert (
+        main(["run", str(path), "--pairs", "--out", str(out), "--scheduler", scheduler, "-q"]) == 1
+    )
     summary = pd.read_csv(out / "summary.csv", dtype={"job": str})
     assert summary["job"].tolist() == names
     assert summary["status"].tolist() == ["done", "done", "done", "error"]

@@ -332,7 +332,17 @@ def _write_sweep_log(folder):
 def test_argoverse2_log_from_the_two_sweeps(tmp_path, scheduler, capsys):
     log = _write_sweep_log(tmp_path / "log")
     out = tmp_path / "out"
-    command = ["run", str(log), "--ground", "drop", "--out", str(out), "--scheduler", scheduler]
+    command = [
+        "run",
+        str(log),
+        "--pairs",
+        "--ground",
+        "drop",
+        "--out",
+        str(out),
+        "--scheduler",
+        scheduler,
+    ]
     assert main([*command, "-q"]) == 0
     summary = pd.read_csv(out / "summary.csv")
     jobs = dataset_jobs(log, ground="drop")

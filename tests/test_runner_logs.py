@@ -91,7 +91,7 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
     assert [job.name for job in alone] == [job.name for job in jobs]
     np.testing.assert_array_equal(alone[0].load()["X"], a)
     monkeypatch.chdir(tmp_path)
-    assert main(["run", str(log), "--scheduler", scheduler, "-q"]) == 0
+    assert main(["run", str(log), "--pairs", "--scheduler", scheduler, "-q"]) == 0
     (out,) = [p for p in tmp_path.iterdir() if p.name not in ("data", "0c6e62d7")]
     assert re.fullmatch(r"log-mmreg-run-[0-9a-f]{8}", out.name)
     summary = pd.read_csv(out / "summary.csv")
@@ -120,10 +120,10 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
     path = out / SCENE_FLOW_FOLDER / "log" / f"{STAMPS[0]}.feather"
     whole = path.read_bytes()
     path.unlink()
-    assert main(["run", str(log), "--scheduler", scheduler, "-q"]) == 0
+    assert main(["run", str(log), "--pairs", "--scheduler", scheduler, "-q"]) == 0
     assert pd.read_csv(out / "summary.csv")["resumed"].all() and path.read_bytes() == whole
     # Without a map, --ground drop is the estimator's, as in 'mmreg register'.
-    command = ["run", str(log), "--ground", "drop", "--scheduler", scheduler, "-q"]
+    command = ["run", str(log), "--pairs", "--ground", "drop", "--scheduler", scheduler, "-q"]
     assert main([*command, "--out", str(tmp_path / "drop")]) == 0
     dropped = pd.read_csv(tmp_path / "drop" / "summary.csv")
     for k, job in enumerate(jobs):
@@ -138,7 +138,7 @@ def test_log_without_annotations_nor_map_registers_its_raw_sweeps(
 def test_dropped_ground_rows_move_with_the_static_world_in_the_challenge_file(tmp_path, scheduler):
     log = write_log(tmp_path / "log", annotations=False)  # a map: the ground is known
     out = tmp_path / "out"
-    command = ["run", str(log), "--ground", "drop", "--scheduler", scheduler, "-q"]
+    command = ["run", str(log), "--pairs", "--ground", "drop", "--scheduler", scheduler, "-q"]
     assert main([*command, "--out", str(out)]) == 0
     for k, job in enumerate(dataset_jobs(log, ground="drop")):
         data = job.load()
@@ -207,7 +207,9 @@ def test_split_with_broken_logs_gives_failed_rows_and_the_others_go_on(tmp_path,
     single.mkdir(parents=True)
     shutil.copy(torn / "sensors" / "lidar" / f"{STAMPS[0]}.feather", single)  # no pair
     out = tmp_path / "out"
-    assert main(["run", str(split), "--out", str(out), "--scheduler", scheduler, "-q"]) == 1
+    assert (
+        main(["run", str(split), "--pairs", "--out", str(out), "--scheduler", scheduler, "-q"]) == 1
+    )
     assert "failed" in capsys.readouterr().err
     summary = pd.read_csv(out / "summary.csv").set_index("job")
     a0, a1, b0, b1 = (f"{log}_{t}" for log in "ab" for t in STAMPS[:2])
@@ -333,7 +335,10 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
     jobs = dataset_jobs(sequence)
     assert [job.name for job in jobs] == ["000000", "000001"]
     out = tmp_path / "out"
-    assert main(["run", str(sequence), "--out", str(out), "--scheduler", scheduler, "-q"]) == 0
+    assert (
+        main(["run", str(sequence), "--pairs", "--out", str(out), "--scheduler", scheduler, "-q"])
+        == 0
+    )
     summary = pd.read_csv(out / "summary.csv")
     assert summary["n"].tolist() == [400, 390] and summary["n_sweep"].tolist() == [390, 400]
     for k, job in enumerate(jobs):
@@ -359,7 +364,16 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
     (sequence / "velodyne" / "000002.bin").write_bytes(b"\0" * 20)
     assert (
         main(
-            ["run", str(sequence), "--out", str(tmp_path / "torn"), "--scheduler", scheduler, "-q"]
+            [
+                "run",
+                str(sequence),
+                "--pairs",
+                "--out",
+                str(tmp_path / "torn"),
+                "--scheduler",
+                scheduler,
+                "-q",
+            ]
         )
         == 1
     )
@@ -369,7 +383,7 @@ def test_kitti_sequence(tmp_path, scheduler, capsys):
     assert "000002.bin: 20 bytes is not a whole number of KITTI" in torn.loc[1, "error"]
     # KITTI has no ground map: --ground drop is the estimator's (Patchwork++).
     (sequence / "velodyne" / "000002.bin").write_bytes(whole)
-    command = ["run", str(sequence), "--ground", "drop", "--scheduler", scheduler, "-q"]
+    command = ["run", str(sequence), "--pairs", "--ground", "drop", "--scheduler", scheduler, "-q"]
     assert main([*command, "--out", str(tmp_path / "drop")]) == 0
 
 
@@ -385,7 +399,7 @@ def test_ros2_bag_with_a_topic(tmp_path, scheduler, capsys):
     scans[0][3] = np.nan  # no return: left out of the fit, its row kept in the indices
     bag = write_bag(tmp_path / "drive", scans, topics=("/a", "/b"))
     out = tmp_path / "out"
-    command = ["run", str(bag), "--scheduler", scheduler, "-q", "--out", str(out)]
+    command = ["run", str(bag), "--pairs", "--scheduler", scheduler, "-q", "--out", str(out)]
     assert main(command) == 2  # two PointCloud2 topics: which one?
     assert "/a" in capsys.readouterr().err
     assert main([*command, "--topic", "/b"]) == 0
@@ -411,7 +425,9 @@ def test_default_out_names_differ_by_path_and_keep_ground_is_an_alias(tmp_path, 
     two = parser.parse_args(["run", str(tmp_path / "y" / "log")])
     assert default_out(one) != default_out(two)
     assert default_out(one).startswith("log-mmreg-run-")
-    assert one.ground == "auto" and one.pairs == "auto"
+    # No --pairs: the sequence estimator on a log; a bare --pairs is today's auto.
+    assert one.ground == "auto" and one.pairs is None
+    assert parser.parse_args(["run", "log", "--pairs"]).pairs == "auto"
     assert parser.parse_args(["run", "log", "--keep-ground"]).ground == "keep"
     with pytest.raises(SystemExit):
         parser.parse_args(["run", "log", "--help"])

@@ -1,11 +1,11 @@
 """``mmreg run``: process a whole dataset as independent jobs on Dask (resumable)."""
 
+import argparse
 import contextlib
 import hashlib
 import importlib.util
 import json
 import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -14,12 +14,47 @@ from mmreg._cli._common import CLIError, one_line, plural, reading
 from mmreg._cli.register import TAU_RULE, _positive_int, _seed, _tau, resolve_tau
 
 NAME = "run"
-HELP = "process a dataset (a folder of frames or files, Argoverse 2 logs) on Dask"
+HELP = "process LiDAR logs (tracks per log) or a dataset of pairs on Dask"
 DESCRIPTION = """\
-Run the registration on every job of DATASET, as independent tasks on a Dask cluster: a
-LocalCluster on this machine by default, or the one at --scheduler.
+Run the registration over DATASET as independent tasks on a Dask cluster: a LocalCluster
+on this machine by default, or the one at --scheduler.
 
-DATASET is one of
+A LiDAR log (a ROS bag, a KITTI or SemanticKITTI sequence, an Argoverse 2 log, a folder
+of frames) is registered by default as a whole by the sequence estimator
+(SequenceRegistration): every moving object is tracked from frame to frame with one id.
+A folder of logs (an Argoverse 2 split, KITTI's sequences/ or its root) runs one log per
+task. Written into --out (for a folder of logs, into --out/<log>/):
+  - labels/<frame>.label: one uint32 per row of every frame's file (rows that are no
+    return too, 0), the last frame included, as the LiDAR-MOS tools read them: lower
+    16 bits 251 moving, 9 static, 0 unlabelled (outliers, the ego vehicle's body, no
+    return); upper 16 bits the track id (0 for the static world);
+  - tracks.csv: one row per track and frame, in the log's frame (the first sensor
+    pose's): track, frame, time_s, the centroid x_m, y_m, z_m, the box length_m,
+    width_m, height_m, yaw_rad, the velocity vx_m_s, vy_m_s, vz_m_s, speed_m_s,
+    yaw_rate_rad_s, points; where the log has no times and --frame-rate is not given,
+    per frame: vx_m_frame, ..., yaw_rate_rad_frame;
+  - poses.txt: the sensor's pose of every frame in KITTI's format (the first the
+    identity), as evo reads it;
+  - frames.csv: one row per frame (its file, time, points, moving points and objects,
+    tracks, seconds);
+  - with --pictures, pictures/<frame>.png (every frame from above: moving points by
+    track id with the ids and trails, the static world grey) and pictures/animation.gif;
+  - Argoverse 2 logs also: av2_scene_flow/<log>/<timestamp_ns>.feather at the top of
+    --out, the flow of every point of each sweep but the last in the scene-flow
+    challenge's format (is_dynamic: the points of moving tracks);
+  - log.json (written last: a log is done once it is there) and run.json (the options
+    and the timings); for a folder of logs, summary.csv (one row per log).
+The log's poses (KITTI's poses.txt, Argoverse 2's ego poses) start each ego motion
+unless --no-poses. Run again after an interruption: a finished log whose files did not
+change is skipped. The console shows the tracks and the frames (moving objects, seconds
+per frame) of one log, a row per log of several; -q prints where the results went.
+'mmreg evaluate' and 'mmreg view' read the result.
+
+--pairs runs per-pair jobs instead, as below (also the default for a folder of
+correspondence files, and with --flow); --ground, --method, --max-iter and --tau set the
+sequence estimator's pair registration as theirs; --capture-times applies to pairs only.
+
+Per-pair jobs: DATASET is one of
   - an Argoverse 2 log (a folder with sensors/lidar; annotations.feather, the ego poses
     and map/ are used when there: the test split and the LiDAR dataset have no
     annotations), or a folder of logs (a split): one job per consecutive sweep pair (N
@@ -43,7 +78,7 @@ DATASET is one of
     file; an .npz may hold the truth too ('labels', 'flow'), then scored.
 
 --pairs says what a job fits:
-  - auto (default): sweeps for LiDAR logs and frames;
+  - auto (a bare --pairs): sweeps for LiDAR logs and frames;
   - sweeps: two raw sweeps of any sizes and orders, registered from the points alone:
     sweep k to sweep k+1 by SweepRegistration (ego motion and object motions by ICP,
     clusters by the --method variant);
@@ -106,6 +141,10 @@ path (a shared file system); the results come back to this machine.
 """
 EPILOG = """\
 examples:
+  mmreg run /data/kitti/dataset/sequences/08 --out kitti-08 --pictures
+  mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val-tracks
+  mmreg run scene-0006 --frame-rate 2 --out scene-0006   # nuScenes keyframes: 2 Hz
+  mmreg run /data/kitti/odometry/sequences/08 --pairs --out kitti-08-pairs
   mmreg run /data/av2/sensor/test/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --out test-0c6e
   mmreg run /data/av2/sensor/val --scheduler tcp://10.0.0.5:8786 --out val
   mmreg run /data/av2/sensor/val/0c6e62d7-bdfa-3061-8d3d-03b13aa21f68 --flow zeroflow/val
@@ -140,7 +179,8 @@ def add_arguments(parser):
     parser.add_argument(
         "--pictures",
         action="store_true",
-        help="also draw every job's result (a LiDAR sweep from above) into OUT/pictures/",
+        help="also draw every frame of a log from above, and its animation (pairs: every "
+        "job's result) into OUT/pictures/",
     )
     parser.add_argument(
         "--out",
@@ -180,11 +220,31 @@ def add_arguments(parser):
     parser.add_argument("--layout", choices=LAYOUTS, default="auto", help="what DATASET holds")
     parser.add_argument(
         "--pairs",
-        choices=PAIRS,
-        default="auto",
-        help="what a job fits: 'sweeps', two raw sweeps (the default for LiDAR logs and "
-        "frames); 'truth', an Argoverse 2 log's ground-truth flow (the fit sees the "
-        "answer); 'aligned', index-aligned frames; see above",
+        nargs="?",
+        const="auto",
+        default=None,
+        type=_pairs,
+        metavar="{" + ",".join(PAIRS) + "}",
+        help="per-pair jobs instead of the sequence estimator: 'sweeps' (also bare --pairs "
+        "or 'auto'), two raw sweeps; 'truth', an Argoverse 2 log's ground-truth flow (the "
+        "fit sees the answer); 'aligned', index-aligned frames; see above (default: the "
+        "sequence estimator on LiDAR logs and frames, pairs for correspondence files)",
+    )
+    parser.add_argument(
+        "--frame-rate",
+        type=_frame_rate,
+        metavar="HZ",
+        default=None,
+        help="logs: frames per second, for velocities in m/s where the log has no times "
+        "(default: its times; without them, velocities per frame)",
+    )
+    parser.add_argument(
+        "--no-poses",
+        dest="poses",
+        action="store_false",
+        help="logs: do not start the ego motions from the log's poses (KITTI poses.txt, "
+        "Argoverse 2 ego poses); register from the points alone, so that 'mmreg evaluate' "
+        "compares the poses found with independent ones",
     )
     parser.add_argument(
         "--flow",
@@ -238,6 +298,25 @@ def add_arguments(parser):
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no table")
 
 
+def _pairs(text):
+    if text not in PAIRS:
+        raise argparse.ArgumentTypeError(
+            f"invalid choice: {text!r} (choose from {', '.join(PAIRS)}; a bare --pairs goes "
+            "after DATASET)"
+        )
+    return text
+
+
+def _frame_rate(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected frames per second; got {text!r}") from None
+    if not (0 < value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive number of Hz; got {text}")
+    return value
+
+
 def _configuration(args):
     """What the results in --out depend on (an earlier run resumes only if it matches)."""
     from mmreg import __version__
@@ -259,14 +338,10 @@ def _configuration(args):
 
 
 def _foreign(out):
-    """Names in ``out`` that an 'mmreg run' does not write."""
-    names = sorted(p.name for p in out.iterdir() if p.name not in RUN_FILES)
-    jobs = out / "jobs"
-    if jobs.exists() and not jobs.is_dir():
-        names.append("jobs")
-    elif jobs.is_dir():
-        names += [f"jobs/{p.name}" for p in jobs.iterdir() if p.suffix not in (".npz", ".tmp")]
-    return names
+    """Names in ``out`` that an 'mmreg run' (of pairs or of logs) does not write."""
+    from mmreg._cli._sequence_run import foreign_names
+
+    return foreign_names(out)
 
 
 def check_run_out(out, configuration, *, overwrite):
@@ -306,10 +381,12 @@ def check_run_out(out, configuration, *, overwrite):
 
 
 def _holds_results(out):
-    """Whether ``out`` holds a job's result (an earlier run whose jobs all failed does
-    not: it may be replaced by a run with other options, such as an error's advice)."""
-    jobs = Path(out) / "jobs"
-    return jobs.is_dir() and any(p.suffix == ".npz" for p in jobs.iterdir())
+    """Whether ``out`` holds a job's or a log's result (an earlier run whose jobs all
+    failed does not: it may be replaced by a run with other options, such as an error's
+    advice)."""
+    from mmreg._cli._sequence_run import holds_results
+
+    return holds_results(out)
 
 
 def _estimator(args, jobs):
@@ -356,6 +433,27 @@ def run(args):
     if args.out is None:
         args.out = default_out(args)
     out = Path(args.out)
+    if args.pairs is None and args.flow is None:  # a log, or a folder of logs?
+        from mmreg._cli._sequence_run import run_sequences
+        from mmreg.runner._logs import NotALogError, log_jobs
+
+        try:
+            with reading(args.dataset), _missing_reader(), option_words():
+                logs = log_jobs(
+                    args.dataset,
+                    layout=args.layout,
+                    topic=args.topic,
+                    pattern=args.pattern,
+                    poses=args.poses,
+                )
+        except CLIError as error:
+            if not isinstance(error.__cause__, NotALogError):
+                raise
+        else:
+            args.tau = resolve_tau(args.tau, True)
+            return run_sequences(args, logs)
+    if args.pairs is None:
+        args.pairs = "auto"
     # A listing: no job is loaded yet.
     with reading(args.dataset), _missing_reader(), option_words():
         jobs = dataset_jobs(
@@ -376,9 +474,10 @@ def run(args):
     resuming = check_run_out(out, configuration, overwrite=args.overwrite)  # before any work
     try:
         if args.overwrite:  # only result files, checked above
-            for folder in ("jobs", "av2_scene_flow", "pictures"):
-                if (out / folder).is_dir():
-                    shutil.rmtree(out / folder)
+            from mmreg._cli._sequence_run import remove_results
+
+            if out.is_dir():
+                remove_results(out)
         out.mkdir(parents=True, exist_ok=True)
         record = {"configuration": configuration, "jobs": len(jobs)}
         with mmio.atomic_write(out / "run.json", "w") as handle:

@@ -27,7 +27,14 @@ Score RESULT against the ground truth. RESULT is
     run.json) for the errors;
   - an "mmreg run" folder: every job (a table, one row per job) or the one named by
     --job;
-  - one job's file of a run, RUN/jobs/<job>.npz (its labels, motions and flow).
+  - one job's file of a run, RUN/jobs/<job>.npz (its labels, motions and flow);
+  - an "mmreg run" folder of a log, or of a folder of logs (a table, one row per log, or
+    the log named by --job), scored against the log itself: the moving-object IoU of
+    LiDAR-MOS where the log has labels (labels/<frame>.label beside its frames, in
+    SemanticKITTI's uint32 or a nuScenes conversion's uint8; unlabelled points and the
+    ego body are left out), the tracking scores where the labels carry instance ids,
+    and where the log has poses the relative pose error of every consecutive frame pair
+    (mean and max, metres and degrees) of the poses found. TRUTH does not apply.
 
 TRUTH is
 
@@ -394,6 +401,10 @@ def _text(value, fmt):
 def run(args):
     import pandas as pd
 
+    from mmreg._cli._sequence_results import evaluate_logs, is_log_result
+
+    if is_log_result(args.pred_dir):
+        return evaluate_logs(args)
     results = open_results(args.pred_dir, job=args.job, every_job=args.truth is None)
     rows = []
     for result in results:

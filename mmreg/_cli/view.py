@@ -34,7 +34,12 @@ RESULT is one of
     run.json, which must still hold the same data; a moved or changed file is named);
   - an "mmreg run" folder: the job named by --job (needed when it holds several);
   - one job's file of a run, RUN/jobs/<job>.npz: its labels and motions, and its points
-    loaded again from the run's dataset.
+    loaded again from the run's dataset;
+  - an "mmreg run" folder of a log (or of a folder of logs: --job names the log): the
+    frame --at (default the last) from above in the log's frame (the first sensor
+    pose's), the window following the sensor: the static world grey by height, each
+    moving track in its colour with its id and its trail, unlabelled points (outliers,
+    the ego body) as crosses; written to <frame>.png by default.
 
 Written to --out, by default RESULT/result.png for a result directory (replacing it) and
 <job>.png in the current folder for a job; the format follows the extension of --out
@@ -76,7 +81,16 @@ def add_arguments(parser):
         help="a result directory, an 'mmreg run' folder or one of its jobs/<job>.npz",
     )
     parser.add_argument(
-        "--job", metavar="NAME", default=None, help="the job of an 'mmreg run' folder to draw"
+        "--job",
+        metavar="NAME",
+        default=None,
+        help="the job of an 'mmreg run' folder to draw (a run on a folder of logs: the log)",
+    )
+    parser.add_argument(
+        "--at",
+        metavar="FRAME",
+        default=None,
+        help="a run on logs: the frame to draw, by name (000012) or number (default: the last)",
     )
     parser.add_argument(
         "--out",
@@ -128,7 +142,10 @@ def run(args):
     import numpy as np
 
     from mmreg import io as mmio
+    from mmreg._cli._sequence_results import is_log_result, view_log
 
+    if is_log_result(args.result_dir):
+        return view_log(args)
     (result,) = open_results(args.result_dir, job=args.job)
     folder = Path(args.result_dir)
     own = folder / "result.png" if result.path.is_dir() else Path(f"{result.name}.png")

@@ -28,7 +28,9 @@ Functions of a whole LiDAR log, lists of per-frame arrays (one value per point):
 
 * :func:`moving_iou`: LiDAR-MOS's moving-object IoU, counts summed over the frames;
 * :func:`tracking_scores`: per true object the share of its frames a track finds it in,
-  ID switches and fragmentations (CLEAR-MOT's), and false moving tracks per frame.
+  ID switches and fragmentations (CLEAR-MOT's), and false moving tracks per frame;
+* :func:`relative_pose_errors`: an estimated trajectory of sensor poses against the true
+  one, the motion of every consecutive frame pair (translation and rotation errors).
 """
 
 from sklearn.metrics import adjusted_rand_score
@@ -58,6 +60,7 @@ from mmreg.metrics._scorer import (
     registration_scorers,
 )
 from mmreg.metrics._sequences import TrackingScores, moving_iou, tracking_scores
+from mmreg.metrics._trajectory import relative_pose_errors
 
 __all__ = [
     "TrackingScores",
@@ -82,6 +85,7 @@ __all__ = [
     "objects_found",
     "per_point_error",
     "registration_scorers",
+    "relative_pose_errors",
     "rotation_error",
     "scene_flow_metrics",
     "scene_flow_scorers",

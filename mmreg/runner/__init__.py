@@ -54,6 +54,12 @@ Ctrl-C: the workers of the LocalCluster started here ignore SIGINT (a terminal s
 to the whole process group); the KeyboardInterrupt is this process's, which closes the
 cluster on its way out.
 
+Whole logs: :func:`log_jobs` lists the LiDAR logs of a dataset (one, or a folder of
+them) and :func:`run_logs` fits a :class:`~mmreg.SequenceRegistration` on each as one
+task, resumable log by log, writing per log ``labels/<frame>.label`` (LiDAR-MOS labels
+of every row of every frame), ``tracks.csv``, ``poses.txt`` and ``frames.csv`` (see
+:mod:`mmreg.runner._logs`); :func:`fit_log` is one log's fit, without Dask.
+
 Ground: a job of a log with a map (Argoverse 2) carries out ``ground="drop"`` itself and
 hands the map's masks with ``"auto"``; without a map (KITTI, bags, folders of sweeps) the
 job's explicit ``"keep"`` or ``"drop"`` is set as the estimator's ``ground`` parameter
@@ -90,6 +96,7 @@ from mmreg.runner._jobs import (
     check_jobs,
     dataset_jobs,
 )
+from mmreg.runner._logs import LogJob, fit_log, log_jobs, run_logs
 
 __all__ = [
     "Argoverse2PairJob",
@@ -97,13 +104,17 @@ __all__ = [
     "BrokenLogJob",
     "CorrespondenceFileJob",
     "FramePairJob",
+    "LogJob",
     "SequenceSweepPairJob",
     "SweepPairJob",
     "dataset_jobs",
     "default_estimator",
     "default_sweep_estimator",
+    "fit_log",
+    "log_jobs",
     "read_job_result",
     "run_dataset",
+    "run_logs",
     "sweep_flow",
     "sweep_valid",
     "write_scene_flow",
