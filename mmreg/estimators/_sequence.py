@@ -176,6 +176,8 @@ class SequenceRegistration(BaseEstimator):
     flows_ : list of ndarray
         Per frame, per point: its motion to the next frame (NaN in the last frame and
         for invalid returns).
+    ego_body_masks_ : list of ndarray of bool
+        Per frame, per point: returns from the ego vehicle's own body (labelled -1).
     ego_poses_ : ndarray of shape (n_frames, 4, 4)
         The sensor's pose in each frame (world from sensor), the first the identity or
         the first pose given.
@@ -252,6 +254,7 @@ class SequenceRegistration(BaseEstimator):
         self.labels_ = [r.labels for r in results]
         self.moving_ = [r.moving for r in results]
         self.flows_ = [r.flow for r in results]
+        self.ego_body_masks_ = [r.body for r in results]
         self.ego_poses_ = np.stack([r.pose for r in results])
         tables = [r.tracks for r in results if len(r.tracks)]
         self.tracks_ = (
@@ -267,7 +270,9 @@ class SequenceRegistration(BaseEstimator):
         """Add the next frame of a log, causally, in bounded memory.
 
         Frame ``k``'s result is final once frame ``k + lookahead + 1`` is in: each call
-        puts the frames it makes final in ``finished_`` (a list, usually of one), and
+        puts the frames it makes final in ``finished_`` (a list, usually of one, of
+        Bunches with ``index``, ``time``, ``labels``, ``moving``, ``flow``, ``body``,
+        ``valid``, ``pose`` and ``tracks``, as ``fit`` stores them), and
         :meth:`finish` ends the log. Only the tracks and the last ``lookahead + 2``
         frames are kept, so a log of any length takes the memory of a few frames.
 
@@ -686,6 +691,9 @@ class SequenceRegistration(BaseEstimator):
             valid_labels[frame.body] = -1
         labels = np.full(len(frame.points), -1, dtype=np.intp)
         labels[frame.valid] = valid_labels
+        body = np.zeros(len(frame.points), dtype=bool)
+        if frame.body is not None:
+            body[frame.valid] = frame.body
         flow = np.full((len(frame.points), 3), np.nan)
         if after is not None:
             flow[frame.valid] = self._flow(frame, after, own, carried)
@@ -698,6 +706,8 @@ class SequenceRegistration(BaseEstimator):
             labels=labels,
             moving=labels > 0,
             flow=flow,
+            body=body,
+            valid=frame.valid.copy(),
             pose=frame.pose,
             tracks=self._table(rows),
         )
