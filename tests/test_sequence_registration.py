@@ -236,3 +236,27 @@ def test_the_fitted_log(street):
 def test_bad_input_gets_one_clear_error(frames, kwargs, message):
     with pytest.raises(ValueError, match=message):
         SequenceRegistration().fit(frames, **kwargs)
+
+
+def test_online_memory_is_bounded():
+    """Only the tracks and lookahead + 2 frames are kept, however long the log."""
+    import gc
+
+    from mmreg.estimators._sequence import _Frame
+
+    log = make_lidar_sequence(8, frame_rate=10.0, n_azimuths=256, random_state=0)
+    est = SequenceRegistration(random_state=0, lookahead=1)
+
+    def frames_alive():
+        gc.collect()
+        return sum(isinstance(o, _Frame) for o in gc.get_objects())
+
+    before = frames_alive()  # other tests' estimators hold none once fitted
+    held = []
+    for points, time in zip(log.frames, log.times, strict=True):
+        est.partial_fit(points, time=time)
+        held.append(frames_alive() - before)
+    assert max(held) <= est.lookahead + 2
+    assert held[-1] == held[3]  # flat, not growing with the log
+    est.finish()
+    assert frames_alive() == before

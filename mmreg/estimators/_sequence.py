@@ -61,6 +61,8 @@ _SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
 # sensor, and where the last sweep's body was within this share.
 _BODY_REACH = 0.6
 _BODY_MATCH = 0.01
+# The least evidence a track's motion needs, in points (a quarter of a small object's).
+_MIN_EVIDENCE = 4
 # A place is hidden from a sweep behind a return this much nearer (share of tau).
 _HIDDEN = 0.05
 # Points kept per track (its shape for the prediction and the association).
@@ -83,6 +85,8 @@ class _Frame:
     pair_labels: np.ndarray | None = None  # the pair's labels of the valid rows
     pair_flow: np.ndarray | None = None
     body: np.ndarray | None = None  # valid rows on the ego vehicle's body
+    ground: np.ndarray | None = None  # valid rows on the ground
+    scale: float = np.nan  # the ego ICP's robust residual scale, to the next frame
     track_of: np.ndarray | None = None  # track key of each valid row, -1 none
     motions: dict = field(default_factory=dict)  # track key -> 4 x 4 motion to the next
     rows: list = field(default_factory=list)  # per-track table rows (key, ...)
@@ -155,10 +159,12 @@ class SequenceRegistration(BaseEstimator):
         ``flow_`` and ``ego_motion_``. None: ``SweepRegistration(random_state=...)``.
     tau : float, default=5.0
         The one length, in the points' units (5 for metres, as the pair estimator's).
-    lookahead : int, default=1
-        Frames after frame ``k`` whose pairs may still change its labels (a track born
-        in frame ``k`` is confirmed in frame ``k + 1``). ``partial_fit`` gives frame
-        ``k``'s result once frame ``k + lookahead + 1`` is in.
+    lookahead : int, default=2
+        Frames after frame ``k`` whose pairs may still change its labels: a track born
+        in frame ``k`` is confirmed in frame ``k + 1``, and once confirmed it claims the
+        object in the frames before its birth that are still this recent (its motion run
+        backwards). ``partial_fit`` gives frame ``k``'s result once frame
+        ``k + lookahead + 1`` is in; 0 labels each frame by its own pair and the past.
     max_misses : int, default=3
         Frames a confirmed track coasts on its prediction without evidence.
     frame_rate : float or None, default=None
@@ -204,7 +210,7 @@ class SequenceRegistration(BaseEstimator):
         pair_estimator=None,
         *,
         tau=5.0,
-        lookahead=1,
+        lookahead=2,
         max_misses=3,
         frame_rate=None,
         random_state=None,
@@ -251,6 +257,7 @@ class SequenceRegistration(BaseEstimator):
             )
             results.extend(self.finished_)
         results.extend(self._close())
+        del self._state  # a later partial_fit starts a log of its own
         self.labels_ = [r.labels for r in results]
         self.moving_ = [r.moving for r in results]
         self.flows_ = [r.flow for r in results]
@@ -438,7 +445,8 @@ class SequenceRegistration(BaseEstimator):
         for rows, motion in detections.values():
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
-        self._confirm_and_end(previous, seen)
+        for track in self._confirm_and_end(previous, seen):
+            self._extend_back(track, previous)
         self._carry(previous, frame)
 
     def _carry(self, previous, frame):
@@ -497,12 +505,9 @@ class SequenceRegistration(BaseEstimator):
             if j != static and np.any(labels == j)
         }
         scale = float(getattr(pair, "ego_scale_", np.nan))
-        return _Pair(
-            ego=ego,
-            scale=scale if np.isfinite(scale) and scale > 0 else 0.002 * self.tau,
-            ground=_mask(getattr(pair, "ground_mask_", None), len(first)),
-            detections=detections,
-        )
+        previous.scale = scale if np.isfinite(scale) and scale > 0 else 0.002 * self.tau
+        previous.ground = _mask(getattr(pair, "ground_mask_", None), len(first))
+        return _Pair(ego=ego, scale=previous.scale, ground=previous.ground, detections=detections)
 
     def _carried_body(self, previous, points):
         """The points of a sweep within the body's matching distance of where the last
@@ -566,7 +571,10 @@ class SequenceRegistration(BaseEstimator):
             for speed in _SPEEDS
         ] + [motion for _, motion in clusters]
         min_points = self._min_points()
-        # A confirmed track needs less new evidence: its past shows it moves.
+        # A confirmed track needs less new evidence (its past shows it moves), and a
+        # small object (a walker of 20 points) a quarter of its points.
+        needed = min_points // 2 if track.confirmed else min_points
+        needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
         claim = track_claim(
             first,
             near,
@@ -576,7 +584,7 @@ class SequenceRegistration(BaseEstimator):
             frame.target(),
             pair.scale,
             max_distance=0.2 * self.tau,
-            min_evidence=min_points // 2 if track.confirmed else min_points,
+            min_evidence=needed,
             up=previous.up,
             view=frame.view(),
             margin=_HIDDEN * self.tau,
@@ -642,20 +650,85 @@ class SequenceRegistration(BaseEstimator):
         """Confirm the tentative tracks seen twice; coast the others, ending those that
         missed too many frames (a tentative one at its first miss)."""
         state = self._state
-        alive = []
+        alive, confirmed = [], []
         for track in state.tracks:
             if track.key in seen:
                 if not track.confirmed and track.hits >= 2:
                     state.n_confirmed += 1
                     track.identity = state.n_confirmed
                     state.identity[track.key] = track.identity
-                previous.rows.append(_row(track, previous, seen[track.key]))
+                    confirmed.append(track)
+                previous.rows.append(
+                    _row(
+                        track.key,
+                        track.points,
+                        track.omega,
+                        track.velocity,
+                        previous,
+                        seen[track.key],
+                    )
+                )
             else:
                 track.coast(previous.time, previous.index)
                 if track.misses > (self.max_misses if track.confirmed else 0):
                     continue
             alive.append(track)
         state.tracks = alive
+        return confirmed
+
+    def _extend_back(self, track, latest):
+        """A newly confirmed track's points in the frames before its first detection,
+        while they are pending: its twist run backwards, claimed as in a forward pair.
+
+        A pair often sees an object move only once it is near; the frames before, still
+        within ``lookahead``, get what the track's motion claims there.
+        """
+        frames = {f.index: f for f in (*self._state.pending, latest)}
+        later = frames.get(track.first_frame)
+        while later is not None and track.first_frame - 1 in frames:
+            frame = frames[track.first_frame - 1]
+            seen = later.track_of == track.key
+            if frame.track_of is None or seen.sum() < _MIN_EVIDENCE:
+                return
+            points = transform(later.pose, later.returns[seen])
+            dt = later.time - frame.time
+            centre = points.mean(axis=0)
+            starts, predicted = [], []
+            for speed in _SPEEDS:
+                # The world motion that brought the object from ``frame`` to ``later``.
+                before = centre - track.velocity * dt * speed
+                motion = predicted_motion(track.omega, track.velocity, before, dt * speed)
+                starts.append(compose(inverse(later.pose), motion, frame.pose))
+                predicted.append(transform(inverse(motion), points))
+            prediction = transform(inverse(frame.pose), predicted[0])
+            first = frame.returns
+            free = ~(frame.ground | frame.body) & (frame.track_of < 0)
+            near = near_points(first, prediction, _NEAR * self.tau, np.flatnonzero(free))
+            tight = near_points(first, prediction, _TIGHT * self.tau, near)
+            claim = track_claim(
+                first,
+                near,
+                tight,
+                starts,
+                frame.ego,
+                later.target(),
+                frame.scale,
+                max_distance=0.2 * self.tau,
+                min_evidence=min(self._min_points(), max(_MIN_EVIDENCE, len(points) // 4)),
+                up=frame.up,
+                view=later.view(),
+                margin=_HIDDEN * self.tau,
+            )
+            if claim is None:
+                return
+            frame.track_of[claim.rows] = track.key
+            frame.motions[track.key] = claim.motion
+            world = compose(later.pose, claim.motion, inverse(frame.pose))
+            found = transform(frame.pose, first[claim.rows])
+            omega, velocity = twist_of(world, found.mean(axis=0), dt)
+            frame.rows.append(_row(track.key, found, omega, velocity, frame, len(claim.rows)))
+            track.first_frame -= 1
+            later = frame
 
     def _min_points(self):
         estimator = self.pair_estimator
@@ -786,12 +859,12 @@ def _sample(points, rng):
     return points[rng.choice(len(points), _TRACK_POINTS, replace=False)]
 
 
-def _row(track, frame, n_points):
-    points = track.points
+def _row(key, points, omega, velocity, frame, n_points):
+    """One row of the tracks' table: track ``key`` seen at ``frame`` (world ``points``)."""
     centre = points.mean(axis=0)
     length, width, height, yaw = _box(points)
     return {
-        "key": track.key,
+        "key": key,
         "frame": frame.index,
         "time": frame.time,
         "x": centre[0],
@@ -801,10 +874,10 @@ def _row(track, frame, n_points):
         "width": width,
         "height": height,
         "yaw": yaw,
-        "vx": track.velocity[0],
-        "vy": track.velocity[1],
-        "vz": track.velocity[2],
-        "speed": float(np.linalg.norm(track.velocity)),
-        "yaw_rate": float(track.omega[2]),
+        "vx": velocity[0],
+        "vy": velocity[1],
+        "vz": velocity[2],
+        "speed": float(np.linalg.norm(velocity)),
+        "yaw_rate": float(omega[2]),
         "points": n_points,
     }

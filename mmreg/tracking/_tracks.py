@@ -11,7 +11,7 @@ confirmed when its motion holds into a second pair: a detection there follows it
 prediction. A motion seen in one pair only (a ghost) dies tentative.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,7 +33,11 @@ class Track:
     hits: int = 1
     misses: int = 0
     identity: int = 0  # the public id, given when confirmed
-    history: list = field(default_factory=list)
+    first_frame: int = -1  # the earliest frame it has points in (-1: its first frame)
+
+    def __post_init__(self):
+        if self.first_frame < 0:
+            self.first_frame = self.frame
 
     @property
     def centre(self):
