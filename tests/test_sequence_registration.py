@@ -260,3 +260,37 @@ def test_online_memory_is_bounded():
     assert held[-1] == held[3]  # flat, not growing with the log
     est.finish()
     assert frames_alive() == before
+
+
+class _Recording(BaseEstimator):
+    """SweepRegistration that records what each pair's fit was given."""
+
+    calls = []
+
+    def __init__(self, random_state=None):
+        self.random_state = random_state
+
+    def fit(self, points, *, sweep, **kwargs):
+        type(self).calls.append(kwargs)
+        est = SweepRegistration(random_state=self.random_state).fit(points, sweep=sweep, **kwargs)
+        for name, value in vars(est).items():
+            if name.endswith("_") and not name.startswith("_"):
+                setattr(self, name, value)
+        return self
+
+
+def test_each_pair_gets_the_log_s_times_ego_start_and_body(street):
+    log, _ = street
+    offsets = [np.linspace(0.0, 0.1, len(f)) for f in log.frames]
+    _Recording.calls = []
+    est = SequenceRegistration(_Recording(random_state=0), random_state=0)
+    est.fit(log.frames, times=log.times, point_times=offsets)
+    calls = _Recording.calls
+    assert len(calls) == len(log.frames) - 1
+    for k, kwargs in enumerate(calls):
+        assert kwargs["interval"] == pytest.approx(log.times[k + 1] - log.times[k])
+        np.testing.assert_array_equal(kwargs["times"], offsets[k])
+        np.testing.assert_array_equal(kwargs["sweep_times"], offsets[k + 1])
+    assert "ego_motion" not in calls[0] and all("ego_motion" in c for c in calls[1:])
+    with pytest.raises(ValueError, match="point_times goes with times"):
+        SequenceRegistration().fit(log.frames, point_times=offsets)

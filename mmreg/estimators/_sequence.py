@@ -24,6 +24,7 @@ from mmreg._validation import invalid_rows
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
+from mmreg.sweeps._motion_bounds import impossible_motions
 from mmreg.tracking._evidence import near_points, track_claim
 from mmreg.tracking._level_icp import level_icp, level_part
 from mmreg.tracking._motion import (
@@ -97,6 +98,7 @@ class _Frame:
     ego: np.ndarray | None = None  # 4 x 4 ego motion to the next frame
     up: np.ndarray | None = None  # the vertical, in a z-up LiDAR sweep
     seconds: bool = False  # whether ``time`` is in seconds (else the frame's index)
+    point_times: np.ndarray | None = None  # capture times of the valid rows, seconds
 
     @property
     def returns(self):
@@ -223,19 +225,24 @@ class SequenceRegistration(BaseEstimator):
         self.random_state = random_state
 
     # ------------------------------------------------------------------ public API
-    def fit(self, frames, y=None, *, times=None, poses=None):
+    def fit(self, frames, y=None, *, times=None, poses=None, point_times=None):
         """Register a whole log.
 
         Parameters
         ----------
         frames : sequence of array-like of shape (n_k, 3)
-            The sweeps in order, each in its sensor's frame (or a sequence from
-            :func:`mmreg.datasets.open_sequence`).
+            The sweeps in order, each in its sensor's frame, or a sequence from
+            :func:`mmreg.datasets.open_sequence` (whose frames' timestamps and points'
+            capture times are used where ``times`` and ``point_times`` are None).
         y : Ignored
         times : array-like of shape (n_frames,) or None
             Each frame's time in seconds.
         poses : array-like of shape (n_frames, 4, 4) or None
             Known sensor poses (odometry): the ego motions start from them.
+        point_times : sequence of array-like of shape (n_k,) or None
+            Each point's capture time, seconds after its frame's time (Argoverse 2's
+            ``offset_ns * 1e-9``, a bag's ``t`` field): the pairs deskew the moving
+            objects with them (see :class:`~mmreg.SweepRegistration`). Needs ``times``.
 
         Returns
         -------
@@ -245,15 +252,26 @@ class SequenceRegistration(BaseEstimator):
         n = len(frames)
         if n < 2:
             raise ValueError(f"a log needs at least 2 frames; got {n}.")
+        if times is None and all(getattr(f, "timestamp", None) is not None for f in frames):
+            times = [f.timestamp for f in frames]
         times = self._check_times(times, n)
         poses = self._check_poses(poses, n)
+        if point_times is None and all(getattr(f, "times", None) is not None for f in frames):
+            point_times = [f.times for f in frames]
+        if point_times is not None and (times is None or len(point_times) != n):
+            raise ValueError(
+                "point_times goes with times: one array of capture times per frame, and "
+                "each frame's time in seconds."
+            )
         self._reset()
         results = []
         for k in range(n):
             frame = frames[k]
-            points = getattr(frame, "points", frame)
             self._step(
-                points, None if times is None else times[k], None if poses is None else poses[k]
+                getattr(frame, "points", frame),
+                None if times is None else times[k],
+                None if poses is None else poses[k],
+                None if point_times is None else point_times[k],
             )
             results.extend(self.finished_)
         results.extend(self._close())
@@ -273,7 +291,7 @@ class SequenceRegistration(BaseEstimator):
         self.n_tracks_ = int(self.tracks_["track"].nunique()) if len(self.tracks_) else 0
         return self
 
-    def partial_fit(self, points, y=None, *, time=None, pose=None):
+    def partial_fit(self, points, y=None, *, time=None, pose=None, point_times=None):
         """Add the next frame of a log, causally, in bounded memory.
 
         Frame ``k``'s result is final once frame ``k + lookahead + 1`` is in: each call
@@ -292,6 +310,8 @@ class SequenceRegistration(BaseEstimator):
             Its time in seconds (None: ``frame_rate``, else its index).
         pose : array-like of shape (4, 4) or None
             Its known sensor pose (odometry), from which its ego motion starts.
+        point_times : array-like of shape (n,) or None
+            Each point's capture time, seconds after ``time`` (see :meth:`fit`).
 
         Returns
         -------
@@ -302,7 +322,9 @@ class SequenceRegistration(BaseEstimator):
             self._reset()
         if pose is not None:
             pose = self._check_poses(np.asarray(pose, dtype=float)[None], 1)[0]
-        self._step(points, time, pose)
+        if point_times is not None and time is None:
+            raise ValueError("point_times goes with time: the frame's time in seconds.")
+        self._step(points, time, pose, point_times)
         return self
 
     def finish(self):
@@ -343,7 +365,7 @@ class SequenceRegistration(BaseEstimator):
             return float(time)
         return index / self.frame_rate if self.frame_rate is not None else float(index)
 
-    def _step(self, points, time, pose):
+    def _step(self, points, time, pose, point_times=None):
         state = self._state
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] < 3:
@@ -352,6 +374,14 @@ class SequenceRegistration(BaseEstimator):
         valid = ~invalid_rows(np.hstack([points, points]))
         index = state.n_frames
         frame = _Frame(index, points, valid, self._time(index, time), given_pose=pose)
+        if point_times is not None:
+            point_times = np.asarray(point_times, dtype=float)
+            if point_times.shape != (len(points),) or not np.all(np.isfinite(point_times)):
+                raise ValueError(
+                    f"frame {index}: point_times must be {len(points)} finite numbers, "
+                    "one per point."
+                )
+            frame.point_times = point_times[valid]
         frame.seconds = time is not None or self.frame_rate is not None
         if valid.sum() >= 3 and is_z_up_sweep(points[valid]):
             frame.up = np.array([0.0, 0.0, 1.0])
@@ -464,6 +494,8 @@ class SequenceRegistration(BaseEstimator):
                 continue
             distance, _ = cKDTree(moved).query(points[near])
             near = near[distance <= EXPLAINED_SPACINGS * normals.spacing(near)]
+            if len(near) < _MIN_EVIDENCE:  # a few points are no object's
+                continue
             frame.carried[near] = key
             free[near] = False
             track = next((t for t in self._state.tracks if t.key == key), None)
@@ -481,6 +513,16 @@ class SequenceRegistration(BaseEstimator):
         parameters = _fit_parameters(estimator)
         if frame.seconds and "interval" in parameters:
             kwargs["interval"] = dt  # bounds the objects' motions by what road users do
+        # With capture times (any offset at all) the pair deskews the moving objects.
+        timed = (
+            frame.seconds
+            and "times" in parameters
+            and previous.point_times is not None
+            and frame.point_times is not None
+            and (np.any(previous.point_times != 0) or np.any(frame.point_times != 0))
+        )
+        if timed:
+            kwargs.update(times=previous.point_times, sweep_times=frame.point_times)
         if "ego_body" in parameters and previous.body is not None and previous.body.any():
             # The ego vehicle's body is fixed in the sensor's frame: found once, it is
             # the next sweep's points where the last sweep's body points were.
@@ -599,6 +641,8 @@ class SequenceRegistration(BaseEstimator):
         world = compose(frame.pose, motion, inverse(previous.pose))
         _, velocity = twist_of(world, transform(previous.pose, first[rows]).mean(axis=0), dt)
         if not consistent_motion(track, velocity, dt, _MOTION_TOLERANCE * self.tau):
+            return None
+        if not self._possible(previous, rows, motion, dt):
             return None
         return rows, motion
 
@@ -719,7 +763,7 @@ class SequenceRegistration(BaseEstimator):
                 view=later.view(),
                 margin=_HIDDEN * self.tau,
             )
-            if claim is None:
+            if claim is None or not self._possible(frame, claim.rows, claim.motion, dt):
                 return
             frame.track_of[claim.rows] = track.key
             frame.motions[track.key] = claim.motion
@@ -729,6 +773,26 @@ class SequenceRegistration(BaseEstimator):
             frame.rows.append(_row(track.key, found, omega, velocity, frame, len(claim.rows)))
             track.first_frame -= 1
             later = frame
+
+    def _possible(self, frame, rows, motion, dt):
+        """Whether ``motion`` of ``frame``'s points ``rows`` is one a road user can make
+        (:mod:`mmreg.sweeps._motion_bounds`: speed and turn with the interval in seconds,
+        no level sheet sliding along itself in a z-up sweep)."""
+        points = frame.returns[rows]
+        labels = np.ones(len(rows), dtype=np.intp)
+        rotations = np.stack([frame.ego[:3, :3], motion[:3, :3]])
+        translations = np.stack([frame.ego[:3, 3], motion[:3, 3]])
+        impossible, _ = impossible_motions(
+            points,
+            labels,
+            (rotations, translations),
+            0,
+            scale=self.tau,
+            reach=np.inf,
+            interval=dt if frame.seconds else None,
+            up=frame.up,
+        )
+        return not impossible[1]
 
     def _min_points(self):
         estimator = self.pair_estimator
@@ -844,9 +908,19 @@ class _Pair:
     detections: dict  # moving cluster -> (rows, 4 x 4 motion)
 
 
+class _Anything:
+    """Contains every name: the parameters of a ``fit(**kwargs)``."""
+
+    def __contains__(self, name):
+        return True
+
+
 def _fit_parameters(estimator):
-    """The keyword parameters of ``estimator.fit``."""
-    return set(inspect.signature(estimator.fit).parameters)
+    """The keyword parameters of ``estimator.fit`` (everything, for ``**kwargs``)."""
+    parameters = inspect.signature(estimator.fit).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return _Anything()
+    return set(parameters)
 
 
 def _mask(values, n):
