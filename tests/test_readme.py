@@ -23,6 +23,7 @@ SECTIONS = [
     "Install",
     "Quick start",
     "Your LiDAR sweeps",
+    "Your LiDAR logs",
     "Your scene flow",
     "Formats and frames",
     "What you get",
@@ -76,7 +77,7 @@ def test_block_runs_as_written_without_warnings(path, index, code, tmp_path, mon
 
 def test_every_readme_section_with_code_is_covered():
     with_code = [title for title, text in sections(README).items() if "```python" in text]
-    assert with_code == ["Quick start", "Your LiDAR sweeps", "Your scene flow"]
+    assert with_code == ["Quick start", "Your LiDAR sweeps", "Your LiDAR logs", "Your scene flow"]
     assert len(python_blocks(ROOT / "docs" / "python.md")) >= 3
 
 
@@ -101,6 +102,28 @@ def test_lidar_sweeps_block_finds_the_moving_cars():
     assert est.moving_.sum() == len(cars) and not est.moving_[est.static_cluster_]
     # The ground, rings of road included, is the static world's.
     assert np.all(est.labels_[est.ground_mask_] == est.static_cluster_)
+
+
+def test_lidar_logs_block_tracks_the_moving_cars():
+    namespace = _readme_block("Your LiDAR logs")
+    est, log = namespace["est"], namespace["log"]
+    found = 0
+    for car in (k for k, kind in enumerate(log.kinds) if kind == "car"):
+        frames = [k for k in range(len(log.frames)) if log.moving[k][log.labels[k] == car].any()]
+        held = [est.labels_[k][log.labels[k] == car] for k in frames]
+        majority = [int(np.bincount(h[h >= 0]).argmax()) for h in held if (h >= 0).any()]
+        ids = {i for i in majority if i > 0}
+        assert len(ids) <= 1  # one id over the whole log: no identity switch
+        found += bool(ids)
+    assert found >= 3
+    # A cruising car's track has its speed (m/s) within 5 %.
+    objects = log.objects.set_index(["frame", "id"])
+    for track, rows in est.tracks_.groupby("track"):
+        held = np.concatenate([log.labels[k][est.labels_[k] == track] for k in rows.frame])
+        car = int(np.bincount(held).argmax())
+        if objects.loc[(rows.frame.iloc[0], car), "motion"] == "cruising":
+            true = np.median([objects.loc[(k, car), "speed"] for k in rows.frame])
+            assert abs(rows.speed.median() - true) < 0.05 * true
 
 
 def test_scene_flow_block_finds_the_moving_car_and_the_gross_errors():
