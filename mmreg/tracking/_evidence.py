@@ -19,6 +19,8 @@ from mmreg.sweeps._icp import multi_body_icp
 from mmreg.tracking._level_icp import level_icp, level_part
 from mmreg.tracking._motion import transform
 
+# Starts refined by ICP, those with the most evidence.
+_REFINED_STARTS = 2
 # Evidence must exceed this many times the counter-evidence.
 _AGAINST = 2
 
@@ -152,7 +154,7 @@ def track_claim(
     if len(near) < min_evidence:
         return None
     sweep, tree, normals = target
-    seeds, motions = [], []
+    seeds, motions, counts = [], [], []
     for start in starts:
         evidence = near[claimed_points(points[near], start, ego, target, scale, view, margin)]
         if len(evidence) < min_evidence:
@@ -160,8 +162,14 @@ def track_claim(
         ratio, _, _ = spacing_ratio(transform(start, points[tight]), tree, sweep, normals)
         seeds.append(np.union1d(evidence, tight[ratio <= EXPLAINED_SPACINGS]))
         motions.append(start)
+        counts.append(len(evidence))
     if not seeds:
         return None
+    # Only the starts with the most evidence are refined: the others converge to the
+    # same motion or to none.
+    best_starts = np.argsort(counts, kind="stable")[::-1][:_REFINED_STARTS]
+    seeds = [seeds[k] for k in best_starts]
+    motions = [motions[k] for k in best_starts]
     if up is not None:  # road users: a turn about the vertical and a shift
         refined_motions = [
             level_icp(
