@@ -61,6 +61,7 @@ from mmreg.runner._jobs import (
     _sequence_folders,
     _valid_rows,
 )
+from mmreg.runner._workers import run_tasks, task_threads
 
 __all__ = [
     "LOG_FILES",
@@ -429,6 +430,7 @@ def fit_log(job, estimator, *, pictures=False, report=None):
     from sklearn.base import clone
 
     from mmreg.io import semantickitti_mos_labels
+    from mmreg.io._semantickitti import MOS_STATIC
 
     start = time.perf_counter()
     sequence = job.open()
@@ -475,6 +477,8 @@ def fit_log(job, estimator, *, pictures=False, report=None):
                     "moving_objects": int(np.count_nonzero(moving_ids > 0)),
                     "tracks": int(len(np.unique(instance[instance > 0]))),
                     "unlabelled_points": int(np.count_nonzero(semantic == 0)),
+                    "static_points": int(np.count_nonzero(semantic == MOS_STATIC)),
+                    "ego_body_points": 0 if body is None else int(np.count_nonzero(body)),
                     "load_s": float(load_s[k]),
                     "fit_s": float(fit_s[k]),
                 }
@@ -592,16 +596,17 @@ def _summary_row(job, frames, tracks, per_second, poses_given):
     }
 
 
-def _process_log(job, estimator, pictures):
-    """Fit one log (runs on a worker): ``(name, result or None, row)``; an error is the
-    log's row, the others go on."""
+def _process_log(job, estimator, pictures, report=None):
+    """Fit one log (on a worker, or here with ``report``: called with each frame done):
+    ``(name, result or None, row)``; an error is the log's row, the others go on."""
     row = {"log": job.name, "status": "error"}
     try:
         if isinstance(job, BrokenLogJob):
             raise ValueError(job.error)
+        report = _reporter(job.name) if report is None else report
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            result = fit_log(job, estimator, pictures=pictures, report=_reporter(job.name))
+            result = fit_log(job, estimator, pictures=pictures, report=report)
         row = result["row"]
         row["warnings"] = " | ".join(sorted({str(w.message) for w in caught}))[:500]
     except Exception as error:  # one log's failure is its row, not the run's end
@@ -641,9 +646,66 @@ def _finished(job, folder, out, fingerprint, stamps, pictures):
     changed = _changed_input(stamps, record.get("inputs"))
     if changed:
         return None, changed
-    if not all(p.is_file() for p in _expected_files(folder, record, out, pictures)):
+    if not all(p.is_file() for p in _expected_files(folder, record, out, False)):
         return None, ""
     return record["row"], ""
+
+
+def _pictures_missing(folder, record):
+    """Whether a finished log lacks a picture of a frame or its animation."""
+    pictures = Path(folder) / PICTURES_FOLDER
+    names = [f"{name}.png" for name in record["frames"]] + [ANIMATION]
+    return not all((pictures / name).is_file() for name in names)
+
+
+def draw_log(job, folder):
+    """The pictures of a finished log drawn from its files (``labels/``, ``poses.txt``,
+    ``tracks.csv``, ``frames.csv``) and its frames, without fitting it again: written
+    into ``folder/pictures/``, as :func:`fit_log` draws them (the ego vehicle's body is
+    drawn with the unlabelled points: the files do not tell it apart)."""
+    import pandas as pd
+
+    from mmreg import io as mmio
+
+    folder = Path(folder)
+    record = read_log_record(folder)
+    names = [str(n) for n in record["frames"]]
+    sequence = job.open()
+    if len(sequence) != len(names):
+        raise ValueError(
+            f"{job.path}: holds {len(sequence)} frames but its result {len(names)}; the log "
+            "changed since it was run."
+        )
+    poses = mmio.read_kitti_poses(folder / POSES_FILE)
+    tracks = pd.read_csv(folder / TRACKS_FILE).rename(
+        columns={"x_m": "x", "y_m": "y", "z_m": "z", "time_s": "time"}
+    )
+    frames = pd.read_csv(folder / FRAMES_FILE, dtype={"name": str})
+    drawn = []
+    n = len(names)
+    for k, name in enumerate(names):
+        raw = np.fromfile(folder / LABELS_FOLDER / f"{name}.label", dtype="<u4")
+        points = np.asarray(sequence[k].points, float)
+        if len(raw) != len(points):
+            raise ValueError(
+                f"{folder / LABELS_FOLDER / (name + '.label')}: {len(raw)} labels for the "
+                f"{len(points)} rows of frame {k}; the log changed since it was run."
+            )
+        row = frames.iloc[k]
+        title = (
+            f"{job.name} {name} ({k + 1}/{n}): "
+            f"{int(row['moving_objects'])} moving, {int(row['tracks'])} tracks"
+        )
+        shown = tracks[tracks["frame"] <= k] if len(tracks) else None
+        drawn.append(_picture(points, raw, None, poses[k], shown, k, title))
+    animation = _animation(drawn, frames["time_s"].to_numpy(float), None)
+    target = folder / PICTURES_FOLDER
+    target.mkdir(exist_ok=True)
+    for name, png in zip(names, drawn, strict=True):
+        with mmio.atomic_write(target / f"{name}.png") as handle:
+            handle.write(png)
+    with mmio.atomic_write(target / ANIMATION) as handle:
+        handle.write(animation)
 
 
 def _write_log(folder, out, job, result, row, fingerprint, stamps):
@@ -809,7 +871,7 @@ def run_logs(
     folders = {job.name: out / getattr(job, "folder", "") for job in jobs}
     fingerprints = {job.name: _log_fingerprint(job, estimator, _describe) for job in jobs}
     stamps = {job.name: _input_stamps(job) for job in jobs}
-    rows, todo, changed = {}, [], {}
+    rows, todo, changed, redraw = {}, [], {}, []
     for job in jobs:
         found = None
         if not overwrite and not isinstance(job, BrokenLogJob):
@@ -820,6 +882,9 @@ def run_logs(
             todo.append(job)
         else:
             rows[job.name] = found | {"resumed": True}
+            record = read_log_record(folders[job.name])
+            if pictures and _pictures_missing(folders[job.name], record):
+                redraw.append(job)  # --pictures added to a finished run: drawn from files
     total = sum(getattr(job, "n_frames", 0) for job in jobs)
     done = sum(getattr(job, "n_frames", 0) for job in jobs if job.name in rows)
     bar = tqdm(
@@ -830,16 +895,48 @@ def run_logs(
         unit="frame",
         desc="mmreg run",
     )
+
+    def handle(name, result, row):
+        if result is not None:
+            job = by_name[name]
+            _write_log(folders[name], out, job, result, row, fingerprints[name], stamps[name])
+        else:  # an earlier result of this log is of other inputs: no longer its result
+            with contextlib.suppress(OSError):
+                (folders[name] / LOG_RECORD).unlink()
+        rows[name] = row | {"resumed": False}
+        _interrupt.check()
+
+    def here(chosen):
+        for job in chosen:
+            handle(*_process_log(job, estimator, pictures, report=lambda k: bar.update(1)))
+
+    def cluster(chosen, address, workers):
+        begin = time.perf_counter()
+        with _client(address, workers) as client:
+            start_s = time.perf_counter() - begin
+            _run_on(client, chosen, estimator, pictures, bar, handle)
+        return start_s
+
+    by_name = {job.name: job for job in jobs}
+    plan = {"where": "this process", "workers": 0, "start_s": 0.0, "why": "nothing to run"}
     with bar:
         broken = [job for job in todo if isinstance(job, BrokenLogJob)]
         for job in broken:
             rows[job.name] = _process_log(job, estimator, pictures)[2] | {"resumed": False}
         todo = [job for job in todo if not isinstance(job, BrokenLogJob)]
-        if todo:
-            with _client(scheduler, n_workers) as client:
-                _run_on(
-                    client, todo, estimator, pictures, bar, out, folders, fingerprints, stamps, rows
-                )
+        plan = run_tasks(
+            todo,
+            here,
+            cluster,
+            scheduler=scheduler,
+            n_workers=n_workers,
+            threads=task_threads(estimator),
+        )
+        for job in redraw:
+            try:
+                draw_log(job, folders[job.name])
+            except Exception as error:  # a picture's failure is a note, not the log's
+                rows[job.name]["picture_error"] = f"{type(error).__name__}: {error}"[:500]
         for name, change in changed.items():
             if change and name in rows and not rows[name].get("resumed"):
                 rows[name]["changed_input"] = change
@@ -849,16 +946,20 @@ def run_logs(
     for column in ("error", "changed_input", "warnings"):
         if column in frame:
             frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
+    for column in ("picture_error",):
+        if column in frame:
+            frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
     if any(getattr(job, "folder", "") for job in jobs):
         from mmreg import io as mmio
 
         with mmio.atomic_write(out / SUMMARY_FILE, "w") as handle:
             frame.to_csv(handle, index=False, float_format="%.6g")
+    frame.attrs["plan"] = plan | {"redrawn": len(redraw)}
     return frame
 
 
-def _run_on(client, todo, estimator, pictures, bar, out, folders, fingerprints, stamps, rows):
-    """Submit every log, write each as it comes back."""
+def _run_on(client, todo, estimator, pictures, bar, handle):
+    """Submit every log, hand each to ``handle(name, result, row)`` as it comes back."""
     from distributed import as_completed
 
     def advance(event):
@@ -866,7 +967,6 @@ def _run_on(client, todo, estimator, pictures, bar, out, folders, fingerprints, 
 
     with contextlib.suppress(Exception):  # no progress events: the bar moves by logs
         client.subscribe_topic(PROGRESS_TOPIC, advance)
-    by_name = {job.name: job for job in todo}
     futures = [client.submit(_process_log, job, estimator, pictures, pure=False) for job in todo]
     names = {future.key: job.name for future, job in zip(futures, todo, strict=True)}
     for future in as_completed(futures):
@@ -876,15 +976,8 @@ def _run_on(client, todo, estimator, pictures, bar, out, folders, fingerprints, 
             name = names[future.key]
             result = None
             row = {"log": name, "status": "error", "error": f"{type(error).__name__}: {error}"}
-        if result is not None:
-            job = by_name[name]
-            _write_log(folders[name], out, job, result, row, fingerprints[name], stamps[name])
-        else:  # an earlier result of this log is of other inputs: no longer its result
-            with contextlib.suppress(OSError):
-                (folders[name] / LOG_RECORD).unlink()
-        rows[name] = row | {"resumed": False}
+        handle(name, result, row)
         future.release()
-        _interrupt.check()
     with contextlib.suppress(Exception):
         client.unsubscribe_topic(PROGRESS_TOPIC)
 
