@@ -729,11 +729,11 @@ def _write_log(folder, out, job, result, row, fingerprint, stamps):
         )
     tracks = tracks_csv(result["tracks"], result["per_second"])
     with mmio.atomic_write(folder / TRACKS_FILE, "w") as handle:
-        tracks.to_csv(handle, index=False, float_format="%.6g")
+        _exact_times(tracks).to_csv(handle, index=False, float_format="%.6g")
     mmio.write_kitti_poses(folder / POSES_FILE, result["poses"])
     frames = pd.DataFrame(result["frames"])
     with mmio.atomic_write(folder / FRAMES_FILE, "w") as handle:
-        frames.to_csv(handle, index=False, float_format="%.6g")
+        _exact_times(frames).to_csv(handle, index=False, float_format="%.6g")
     if result["pictures"] is not None:
         (folder / PICTURES_FOLDER).mkdir()
         for name, png in zip(result["names"], result["pictures"], strict=True):
@@ -759,6 +759,16 @@ def _write_log(folder, out, job, result, row, fingerprint, stamps):
     }
     with mmio.atomic_write(folder / LOG_RECORD, "w") as handle:
         handle.write(json.dumps(record, indent=1, default=_json_value) + "\n")
+
+
+def _exact_times(table):
+    """``table`` with its ``time_s`` to the microsecond: a bag's stamps are seconds since
+    1970, which six significant digits round to a quarter of an hour."""
+    if "time_s" not in table or not len(table):
+        return table
+    times = table["time_s"].to_numpy(float)
+    text = np.where(np.isfinite(times), np.char.mod("%.6f", times), "")
+    return table.assign(time_s=text)
 
 
 def _json_value(value):
