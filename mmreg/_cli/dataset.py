@@ -16,8 +16,10 @@ from mmreg._cli.register import TAU_RULE, _positive_int, _seed, _tau, resolve_ta
 NAME = "run"
 HELP = "process LiDAR logs (tracks per log) or a dataset of pairs on Dask"
 DESCRIPTION = """\
-Run the registration over DATASET as independent tasks on a Dask cluster: a LocalCluster
-on this machine by default, or the one at --scheduler.
+Run the registration over DATASET as independent tasks: in this process by default
+when a cluster would not pay (a single log, few jobs, no free core for a second worker:
+see "Where the work runs" below), else on a Dask LocalCluster on this machine, or on the
+cluster at --scheduler.
 
 A LiDAR log (a ROS bag, a KITTI or SemanticKITTI sequence, an Argoverse 2 log, a folder
 of frames) is registered by default as a whole by the sequence estimator
@@ -36,7 +38,7 @@ task. Written into --out (for a folder of logs, into --out/<log>/):
   - poses.txt: the sensor's pose of every frame in KITTI's format (the first the
     identity), as evo reads it;
   - frames.csv: one row per frame (its file, time, points, moving points and objects,
-    tracks, seconds);
+    tracks, points of the static world and of the ego body, seconds);
   - with --pictures, pictures/<frame>.png (every frame from above: moving points by
     track id with the ids and trails, the static world grey) and pictures/animation.gif;
   - Argoverse 2 logs also: av2_scene_flow/<log>/<timestamp_ns>.feather at the top of
@@ -45,9 +47,13 @@ task. Written into --out (for a folder of logs, into --out/<log>/):
   - log.json (written last: a log is done once it is there) and run.json (the options
     and the timings); for a folder of logs, summary.csv (one row per log).
 The log's poses (KITTI's poses.txt, Argoverse 2's ego poses) start each ego motion
-unless --no-poses. Run again after an interruption: a finished log whose files did not
-change is skipped. The console shows the tracks and the frames (moving objects, seconds
-per frame) of one log, a row per log of several; -q prints where the results went.
+unless --no-poses. The frames' times come from the log (KITTI's times.txt, a bag's
+header stamps, Argoverse 2's names, a .pcd's absolute time field), else --frame-rate;
+speeds are in m/s whenever they are known. Run again after an interruption: a finished
+log whose files did not change is skipped; --pictures given to a finished log draws its
+pictures from its files. The console shows the tracks and the frames (moving objects,
+the static world's share, seconds per frame) of one log, a row per log of several; -v
+every row, the warnings and where the work ran; -q only where the results went.
 'mmreg evaluate' and 'mmreg view' read the result.
 
 --pairs runs per-pair jobs instead, as below (also the default for a folder of
@@ -115,14 +121,23 @@ ICP (deskewing). Sweeps whose offsets are all zero are registered without;
 them, its ground column what became of the ground (masks, dropped, kept).
 
 Written into --out: jobs/<job>.npz per job (labels, rotations, translations, sigmas,
-flow, moving, indices: the rows of the first sweep's file the job fitted, so that
-labels[k] and flow[k] belong to row indices[k]; meta), each whole or not at all;
+flow, moving, static_cluster, indices: the rows of the first sweep's file the job
+fitted, so that labels[k] and flow[k] belong to row indices[k]; meta), each whole or not
+at all, compressed, labels as small integers and flows as float32, a sweep's flow of
+every row only where it is not the fit's own (mmreg.runner.read_job_result restores it;
+--full-arrays keeps every array whole);
 av2_scene_flow/<log>/<timestamp_ns>.feather per Argoverse 2 job: the flow of every point
 of the sweep in the scene-flow challenge's format (flow_tx_m, flow_ty_m, flow_tz_m,
 is_dynamic; dropped ground and outliers move with the static world), ready for the
 official evaluation; summary.parquet and summary.csv (one row per job: sizes, clusters,
-timings, status, what it was fitted on, and the scores when the truth is known); and
-run.json (the dataset and the options).
+timings, status, what it was fitted on, the static world's share, the fastest moving
+object, and the scores when the truth is known); pictures/<job>.png with --pictures
+(given to a finished run: the missing ones, drawn without fitting again); and run.json
+(the dataset, the options and the timings). The console shows a table of the jobs
+(points, moving objects, the static world's share, the fastest object in m/s where the
+interval is known, seconds), -v every job and the warnings, -q only where the results
+went. 'mmreg evaluate' scores a --pairs run of a LiDAR log against the log's own labels
+and poses, every pair at once.
 
 Run the same command again after an interruption (Ctrl-C, a crash, a lost worker): jobs
 whose complete result is in --out are skipped. A job records the size and modification
@@ -138,6 +153,14 @@ earlier run has no result at all (every job failed): that one is simply replaced
 
 With --scheduler, the workers must have mmreg installed and read DATASET at the same
 path (a shared file system); the results come back to this machine.
+
+Where the work runs: a Dask LocalCluster costs seconds to start (and every worker its
+imports), and workers beside jobs that keep several threads busy only take cores from
+them. By default the tasks run in this process unless at least two workers fit on the
+free cores (the cores less the load of other processes, over each task's own threads,
+the estimator's n_jobs) and, after the first task is timed here, the rest would take
+this process at least twice the cluster's start longer than the workers. --n-workers N
+starts N workers (0: in this process); run.json and -v say where it ran and why.
 """
 EPILOG = """\
 examples:

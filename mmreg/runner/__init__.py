@@ -1,27 +1,31 @@
-"""Run an estimator over a dataset: independent jobs on Dask, resumable, one file per job.
+"""Run an estimator over a dataset: independent jobs, resumable, one file per job.
 
 :func:`run_dataset` fits a copy of the estimator on every job of a dataset (see
-:func:`dataset_jobs`) on a Dask cluster through joblib's ``"dask"`` backend (the
-machinery ``paper/`` sweeps with), writes each job's result into ``OUT/jobs/<name>.npz``
-whole or not at all, skips the jobs whose complete result is already there (of the same
-job, estimator and input files: a job records the size and modification time of every
-file it reads, ``job.inputs()``, and runs again when one changed), and ends with a
-summary table, one row per job (``OUT/summary.parquet`` and ``summary.csv``).
+:func:`dataset_jobs`), in this process or on a Dask cluster through joblib's ``"dask"``
+backend (the machinery ``paper/`` sweeps with; :mod:`mmreg.runner._workers` chooses),
+writes each job's result into ``OUT/jobs/<name>.npz`` whole or not at all, skips the
+jobs whose complete result is already there (of the same job, estimator and input files:
+a job records the size and modification time of every file it reads, ``job.inputs()``,
+and runs again when one changed), and ends with a summary table, one row per job
+(``OUT/summary.parquet`` and ``summary.csv``).
 
-Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas``,
-``flow`` (the rigid flow, :attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when
-the estimator reports it), ``indices`` and ``meta``: a JSON string with the job's summary
-row and the fingerprint of (job, estimator) the result belongs to. ``indices`` (n,) are
-the rows of the job's input the fit saw: for a LiDAR sweep pair, the rows of the first
-sweep's file (``--ground drop`` leaves the ground rows out), so ``labels[k]`` and
-``flow[k]`` belong to row ``indices[k]`` of the sweep as the file holds it;
-``arange(n)`` for frames and correspondence files. Rows that hold no return (NaN, or
+Each result ``.npz`` (compressed) holds ``labels`` (the smallest integer type),
+``rotations``, ``translations``, ``sigmas``, ``flow`` (float32: the rigid flow,
+:attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when the estimator reports
+it), ``static_cluster`` (the static world's cluster), ``indices`` and ``meta``: a JSON
+string with the job's summary row and the fingerprint of (job, estimator) the result
+belongs to. ``indices`` (n,) are the rows of the job's input the fit saw: for a LiDAR
+sweep pair, the rows of the first sweep's file (``--ground drop`` leaves the ground rows
+out), so ``labels[k]`` and ``flow[k]`` belong to row ``indices[k]`` of the sweep as the
+file holds it; ``arange(n)`` for frames and correspondence files. Rows that hold no return (NaN, or
 several all-zero rows: a bag with ``is_dense`` false, an organised cloud, a KITTI scan)
 are left out of every job, in both sweeps, and counted (``n_no_return``). A fit that
 finds the ego vehicle's own body (:attr:`~mmreg.SweepRegistration.ego_body_mask_`)
 stores ``ego_body`` (bool, one per label): those rows are labelled -1 but are no
 outliers (``n_ego_body`` counts them apart). A sweep
-pair also stores ``sweep_flow`` (float32, one row per row of the file),
+pair also stores ``sweep_flow`` (float32, one row per row of the file; the file keeps
+only its rows that are not the fit's own flow, ``sweep_flow_rest`` with the mask
+``sweep_flow_own``, and :func:`read_job_result` restores it whole),
 ``sweep_dynamic`` (bool) and ``sweep_valid`` (bool): the flow of every row, the rows the
 fit did not see (or left without a motion: outliers) moving with the fitted static
 world, whether it moves 0.05 m or more beyond that motion (the Argoverse 2 challenge's
@@ -981,7 +985,11 @@ def run_dataset(
         Address of a running Dask scheduler (``"tcp://host:8786"``); None starts a
         :class:`distributed.LocalCluster` for the run.
     n_workers : int, default=None
-        Worker processes of the LocalCluster (None: one per core); ignored with
+        Worker processes of a LocalCluster; 0 runs the jobs in this process, without a
+        cluster; None chooses (:func:`mmreg.runner._workers.run_tasks`): this process
+        unless at least two workers fit on the free cores given each job's own threads
+        (the estimator's ``n_jobs``) and the jobs left after the first, timed here,
+        would take twice a cluster's start longer here than on them. Ignored with
         ``scheduler``.
     overwrite : bool, default=False
         Run every job again, replacing the results found in ``out``.
@@ -989,8 +997,14 @@ def run_dataset(
         A tqdm progress bar over the jobs on stderr.
     pictures : bool, default=False
         Also draw every job's result as ``mmreg view`` does (a LiDAR sweep from above)
-        into ``out/pictures/<name>.png``; drawn on the workers. Jobs already done are not
-        drawn again.
+        into ``out/pictures/<name>.png``, where the jobs run. A finished job without its
+        picture is drawn from its stored result and its points loaded again, not fitted
+        again.
+    full_arrays : bool, default=False
+        Keep every array of a job's file whole (float64 flow, int64 labels, the
+        sweep's flow of every row); by default the file keeps labels and rows in the
+        smallest integer type, flows as float32, and the sweep's flow only where it is
+        not the fit's own, which :func:`read_job_result` restores exactly.
 
     Returns
     -------
@@ -1018,7 +1032,14 @@ def run_dataset(
         run again because a file it reads changed since the earlier result, that file;
         ``pairs``: what it was fitted on (``"sweeps"``, ``"flow"``, ``"truth"``,
         ``"correspondences"``) and ``truth_fed``: whether that was the ground-truth flow;
-        ``n_file``: rows of the first sweep's file.
+        ``n_file``: rows of the first sweep's file; ``static_share``: the share of the
+        fitted rows (the ego vehicle's body left out) in the static world's cluster;
+        ``max_speed``: the fastest moving cluster's centroid relative to the static
+        world, in ``speed_unit`` (``"m/s"`` when the interval is known, else
+        ``"m/frame"``); ``picture_error``: why a finished job's picture could not be
+        drawn. ``summary.attrs["plan"]`` says where the jobs ran (``where``,
+        ``workers``, ``start_s``: the cluster's start, ``why``, ``redrawn``: the
+        pictures of finished jobs drawn).
 
     Examples
     --------

@@ -4,7 +4,8 @@
 Argoverse 2 log, a folder of frames; or a folder of logs: an Argoverse 2 split, KITTI's
 ``sequences/``), :func:`fit_log` fits a :class:`~mmreg.SequenceRegistration` on one log
 frame by frame (``partial_fit``: the memory of a few frames) and :func:`run_logs` runs
-every log as one task on a Dask cluster and writes its results:
+every log as one task (in this process, or on a Dask cluster when several logs make
+workers pay off) and writes its results:
 
 ``labels/<frame>.label``
     one little-endian ``uint32`` per row of the frame's file (invalid rows too, 0), the
@@ -21,8 +22,9 @@ every log as one task on a Dask cluster and writes its results:
     the sensor's pose of every frame in KITTI's format (12 numbers a line), the first
     the identity;
 ``frames.csv``
-    one row per frame: its file's name, time, rows, returns, moving points and objects,
-    tracks and the seconds it took;
+    one row per frame: its file's name, time (to the microsecond), rows, returns, moving
+    points and objects, tracks, points of the static world and of the ego vehicle's
+    body, and the seconds it took;
 ``pictures/<frame>.png`` and ``pictures/animation.gif`` (``pictures=True``)
     every frame from above and the whole log as one animated GIF;
 ``av2_scene_flow/<log>/<timestamp_ns>.feather`` (Argoverse 2 logs, at the top of ``out``)
@@ -67,6 +69,7 @@ __all__ = [
     "LOG_FILES",
     "LogJob",
     "NotALogError",
+    "draw_log",
     "fit_log",
     "frame_names",
     "log_jobs",
@@ -813,7 +816,7 @@ def run_logs(
     progress=True,
     pictures=False,
 ):
-    """Fit ``estimator`` on every log, one Dask task per log; resumable log by log.
+    """Fit ``estimator`` on every log, one task per log; resumable log by log.
 
     Parameters
     ----------
@@ -827,14 +830,15 @@ def run_logs(
     scheduler : str, default=None
         Address of a running Dask scheduler; None starts a LocalCluster.
     n_workers : int, default=None
-        Worker processes of the LocalCluster (None: one per core).
+        Worker processes of a LocalCluster; 0, or None with a single log: in this
+        process, no cluster; None with several: chosen as :func:`run_dataset` chooses.
     overwrite : bool, default=False
         Run every log again.
     progress : bool, default=True
         A progress bar over the frames on stderr.
     pictures : bool, default=False
         Draw every frame and the log's animation (``pictures/``); a finished log without
-        them is run again.
+        them gets them drawn from its files (:func:`draw_log`), not fitted again.
 
     Returns
     -------
@@ -843,7 +847,9 @@ def run_logs(
         ``moving_objects_per_frame``, ``max_moving_objects``, ``s_per_frame`` (the fit's
         seconds per frame), ``points_per_frame``, ``load_s``, ``fit_s``,
         ``velocity_unit``, ``poses_given``, ``resumed``, ``error``, ``warnings``,
-        ``changed_input`` (a log run again because that file changed).
+        ``changed_input`` (a log run again because that file changed),
+        ``picture_error``; ``summary.attrs["plan"]``: where the logs ran, as
+        :func:`run_dataset`'s.
 
     Examples
     --------
