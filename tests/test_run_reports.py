@@ -253,3 +253,31 @@ def test_frames_csv_counts_the_static_world(frames, tmp_path):
     assert table.loc[1, "static_points"] == int(np.count_nonzero(labels == 9))
     assert "static world" in printed
     assert Path(out / "run.json").is_file()
+
+
+@pytest.mark.parametrize("pays", [True, False])
+def test_run_tasks_times_the_first_task_here_then_chooses(monkeypatch, pays):
+    from mmreg.runner import _workers
+
+    monkeypatch.setattr(_workers, "free_cores", lambda: 4)
+    monkeypatch.setattr(_workers, "worth_a_cluster", lambda n_left, seconds, workers: pays)
+    here, there = [], []
+
+    def on_cluster(tasks, address, workers):
+        there.append((list(tasks), address, workers))
+        return 1.5
+
+    plan = _workers.run_tasks(list("abcdef"), here.extend, on_cluster)
+    if pays:
+        assert here == ["a"] and there == [(list("bcdef"), None, 4)]
+        assert plan["where"] == "local cluster" and plan["workers"] == 4
+        assert plan["start_s"] == 1.5
+    else:
+        assert here == list("abcdef") and there == [] and plan["where"] == "this process"
+    # Told: a scheduler, or a number of workers (0: here), is not second-guessed.
+    here.clear(), there.clear()
+    _workers.run_tasks(list("ab"), here.extend, on_cluster, scheduler="tcp://x:1")
+    _workers.run_tasks(list("ab"), here.extend, on_cluster, n_workers=3)
+    _workers.run_tasks(list("ab"), here.extend, on_cluster, n_workers=0)
+    assert there == [(["a", "b"], "tcp://x:1", None), (["a", "b"], None, 3)]
+    assert here == ["a", "b"]
