@@ -117,8 +117,8 @@ def test_view_finds_a_run_jobs_rows_when_no_returns_were_dropped(tmp_path, sweep
     for k, points in enumerate((holed, holed_sweep)):
         write_kitti_bin(tmp_path / "seq" / "velodyne" / f"{k:06d}.bin", points)
     out = tmp_path / "run"
-    command = ["run", str(tmp_path / "seq"), "--out", str(out), "--scheduler", scheduler, "-q"]
-    assert main(command) == 0
+    command = ["run", str(tmp_path / "seq"), "--pairs", "--out", str(out), "--scheduler"]
+    assert main([*command, scheduler, "-q"]) == 0
     job = out / "jobs" / "000000.npz"
     arrays = np.load(job)
     np.testing.assert_array_equal(arrays["indices"], np.setdiff1d(np.arange(len(a)), rows))

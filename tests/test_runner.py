@@ -57,7 +57,7 @@ def _plain_loop(jobs, estimator):
             "rotations": est.rotations_,
             "translations": est.translations_,
             "sigmas": est.sigmas_,
-            "flow": est.flow_,
+            "flow": est.flow_.astype(np.float32),  # as a job's file keeps it by default
         }
     return out
 
@@ -181,7 +181,7 @@ def test_argoverse2_log_scored_against_the_truth(tmp_path, scheduler):
         est = default_estimator().fit(scene.X)
         arrays, _ = read_job_result(tmp_path / "out" / "jobs" / f"{job.name}.npz")
         np.testing.assert_array_equal(arrays["labels"], est.labels_)
-        np.testing.assert_array_equal(arrays["flow"], est.flow_)
+        np.testing.assert_array_equal(arrays["flow"], est.flow_.astype(np.float32))
         # The wall and the car, each found whole, their rigid flows the true flow.
         assert row["n"] == 320 and row["n_clusters"] == 2 and row["n_moving"] == 1
         assert row["iou"] == 1.0 and row["moving_found"] == 1.0
@@ -261,7 +261,7 @@ def test_raw_sweeps_of_different_sizes_one_job_per_pair(tmp_path, scheduler):
         arrays, row = read_job_result(out / "jobs" / f"{job.name}.npz")
         expected = _fit_job(job, default_sweep_estimator())
         np.testing.assert_array_equal(arrays["labels"], expected.labels_)
-        np.testing.assert_array_equal(arrays["flow"], expected.flow_)
+        np.testing.assert_array_equal(arrays["flow"], expected.flow_.astype(np.float32))
         n = len(np.load(data / f"frame{k}.npy"))
         assert arrays["labels"].shape == (n,) and arrays["flow"].shape == (n, 3)
         # Each box is one cluster of the first sweep, the second box the moving one.

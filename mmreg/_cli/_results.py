@@ -96,6 +96,11 @@ class Result:
         return array[at]
 
 
+def is_run_folder(path):
+    """Whether ``path`` is an 'mmreg run' folder of pairs (``jobs/`` and ``run.json``)."""
+    return _is_run_folder(Path(path))
+
+
 def _is_run_folder(path):
     run = path / "run.json"
     if not (path / "jobs").is_dir() or not run.is_file():
@@ -193,6 +198,8 @@ def _job_result(path):
     from mmreg.io._checks import _check_readable
 
     with reading(path):
+        # Read as stored (flows float32 by default): the sweep's whole flow, which
+        # mmreg.runner.read_job_result restores, is not needed here.
         arrays = _load_npz(_check_readable(path, "a job's result"))
         missing = [name for name in (*_JOB_ARRAYS, "meta") if name not in arrays]
         if missing:
@@ -252,8 +259,6 @@ def _check_body(body, labels, path):
 
 def _load_job(job, result):
     """Load the job named ``result.name`` again from the run's dataset."""
-    from mmreg.runner import dataset_jobs
-
     configuration, run_folder = job
     if configuration is None:
         raise CLIError(
@@ -261,6 +266,20 @@ def _load_job(job, result):
             f"{run_folder / 'run.json'} is missing or names no dataset; open the job inside "
             "its run folder (RUN/jobs/<job>.npz)"
         )
+    jobs = run_jobs(configuration, run_folder)
+    dataset = configuration.get("dataset")
+    found = [j for j in jobs if j.name == result.name]
+    if not found:
+        raise CLIError(f"{dataset}: holds no job {result.name!r} any more (changed since?)")
+    with reading(dataset):
+        data = found[0].load()
+    return data
+
+
+def run_jobs(configuration, run_folder):
+    """The jobs of an 'mmreg run' of pairs, listed again from its dataset and options."""
+    from mmreg.runner import dataset_jobs
+
     dataset = configuration.get("dataset")
     if not dataset or not Path(dataset).exists():
         raise CLIError(
@@ -280,13 +299,10 @@ def _load_job(job, result):
             flow=configuration.get("flow"),
             topic=configuration.get("topic"),
             pattern=configuration.get("pattern"),
+            frame_rate=configuration.get("frame_rate"),
+            poses=configuration.get("poses", True),
         )
-    found = [j for j in jobs if j.name == result.name]
-    if not found:
-        raise CLIError(f"{dataset}: holds no job {result.name!r} any more (changed since?)")
-    with reading(dataset):
-        data = found[0].load()
-    return data
+    return jobs
 
 
 def _job_points(result, required):

@@ -284,6 +284,7 @@ _LINES = [
 _TABLE = [
     ("log", "log", ""),
     ("frames", "frames", "d"),
+    ("pairs", "pairs", "d"),
     ("mos_iou", "MOS IoU", ".3f"),
     ("objects_found_share", "found", ".0%"),
     ("rpe_m_mean", "RPE [m]", ".3f"),
@@ -306,6 +307,173 @@ def evaluate_logs(args):
         )
     results = open_log_results(args.pred_dir, log=args.job)
     rows = [{"log": r.name} | evaluate_log(r) for r in results]
+    return print_scores(rows, args)
+
+
+# --------------------------------------------------------------------------- --pairs runs
+def pair_log_run(path):
+    """The jobs of an 'mmreg run --pairs' of LiDAR logs (KITTI / SemanticKITTI sequences,
+    bags, folders of sweep files), grouped by log: ``{log path: [job, ...]}``; None when
+    ``path`` is no such run (a result directory, a run of correspondences or of
+    Argoverse 2 logs, whose jobs carry their own truth)."""
+    from mmreg._cli._results import is_run_folder, run_jobs
+    from mmreg.runner import BrokenLogJob, SequenceSweepPairJob
+
+    path = Path(path)
+    if not path.is_dir() or not is_run_folder(path):
+        return None
+    with reading(path / "run.json"):
+        configuration = json.loads((path / "run.json").read_text()).get("configuration")
+    if not isinstance(configuration, dict) or not configuration.get("dataset"):
+        return None
+    jobs = [j for j in run_jobs(configuration, path) if not isinstance(j, BrokenLogJob)]
+    if not jobs or not all(isinstance(j, SequenceSweepPairJob) for j in jobs):
+        return None
+    logs = {}
+    for job in jobs:
+        logs.setdefault(job.path, []).append(job)
+    return logs
+
+
+def _pair_static_motion(arrays):
+    """The static world's motion of a pair job's result (4 x 4): its ``static_cluster``,
+    else (results of earlier versions) its largest cluster that does not move."""
+    import numpy as np
+
+    rotations, translations = arrays["rotations"], arrays["translations"]
+    static = int(arrays["static_cluster"]) if "static_cluster" in arrays else -1
+    if static < 0:
+        labels = np.asarray(arrays["labels"])
+        counts = np.bincount(labels[labels >= 0], minlength=len(rotations)).astype(float)
+        moving = arrays.get("moving")
+        if moving is not None and len(moving) == len(counts):
+            counts[np.asarray(moving, bool)] = -1.0
+        static = int(np.argmax(counts)) if len(counts) else -1
+    motion = np.eye(4)
+    if static >= 0:
+        motion[:3, :3], motion[:3, 3] = rotations[static], translations[static]
+    return motion
+
+
+def evaluate_pair_log(run, log, jobs):
+    """The scores of one log of a --pairs run, every pair at once: the moving-object IoU
+    of LiDAR-MOS over every pair's first frame against the log's labels (the rows in the
+    moving clusters; the ego body and unlabelled points left out by the labels' own
+    rules), and the relative pose error of every pair's static-world motion against the
+    log's poses."""
+    import numpy as np
+
+    from mmreg import io as mmio
+    from mmreg.datasets import open_sequence
+    from mmreg.metrics import moving_iou, relative_pose_errors
+    from mmreg.runner import read_job_result
+    from mmreg.runner._logs import frame_names
+
+    first = jobs[0]
+    with reading(log):
+        sequence = open_sequence(log, topic=first.topic, pattern=first.pattern)
+    names = frame_names(sequence)
+    root = Path(log)
+    labels = (root if root.is_dir() else root.parent) / "labels"
+    with reading(log):  # a broken poses file names itself
+        true_poses = getattr(sequence, "poses", None)
+    truth, pred, ignore = [], [], []
+    translation, rotation = [], []
+    done = 0
+    for job in jobs:
+        path = Path(run) / "jobs" / f"{job.name}.npz"
+        found = read_job_result(path)
+        if found is None:
+            continue
+        arrays, _ = found
+        done += 1
+        k = job.index
+        label_path = labels / f"{names[k]}.label"
+        if label_path.is_file():
+            n = len(arrays["sweep_valid"]) if "sweep_valid" in arrays else None
+            if n is None:
+                with reading(log):
+                    n = len(sequence[k].points)
+            with reading(label_path):
+                known = mmio.read_semantickitti_labels(label_path, n_points=n)
+                moving, left_out = mmio.moving_from_labels(known.semantic, known.convention)
+            found_moving = np.zeros(n, bool)
+            rows = np.asarray(arrays["indices"], dtype=np.intp)
+            ids = np.asarray(arrays["labels"])
+            clusters = arrays.get("moving")
+            if clusters is not None:
+                clusters = np.asarray(clusters, bool)
+                kept = ids >= 0
+                found_moving[rows[kept]] = clusters[ids[kept]]
+            truth.append(moving)
+            pred.append(found_moving)
+            ignore.append(left_out)
+        if true_poses is not None:
+            motion = np.linalg.inv(true_poses[k + 1]) @ true_poses[k]
+            found_motion = _pair_static_motion(arrays)
+            # Two-frame trajectories whose one step is each motion: relative_pose_errors
+            # compares inv(P1) P0, the motion itself.
+            errors = relative_pose_errors(
+                np.stack([np.eye(4), np.linalg.inv(found_motion)]),
+                np.stack([np.eye(4), np.linalg.inv(motion)]),
+            )
+            translation.append(float(errors[0][0]))
+            rotation.append(float(errors[1][0]))
+    if not done:
+        raise CLIError(f"{run}: holds no finished job of {log}; run 'mmreg run' again")
+    scores = {
+        "pairs": done,
+        "frames_labelled": len(truth),
+        "mos_iou": math.nan,
+        "moving_points_true": math.nan,
+        "moving_points_predicted": math.nan,
+    }
+    if truth:
+        scores["mos_iou"] = moving_iou(truth, pred, ignore=ignore)
+        kept = [~i for i in ignore]
+        scores["moving_points_true"] = sum(
+            int((t & k).sum()) for t, k in zip(truth, kept, strict=True)
+        )
+        scores["moving_points_predicted"] = sum(
+            int((p & k).sum()) for p, k in zip(pred, kept, strict=True)
+        )
+    for key in ("rpe_m_mean", "rpe_m_max", "rpe_deg_mean", "rpe_deg_max"):
+        scores[key] = math.nan
+    scores["poses_given"] = bool(first.poses and true_poses is not None)
+    if translation:
+        scores.update(
+            rpe_m_mean=float(np.mean(translation)),
+            rpe_m_max=float(np.max(translation)),
+            rpe_deg_mean=float(np.mean(rotation)),
+            rpe_deg_max=float(np.max(rotation)),
+        )
+    elif not truth:
+        raise CLIError(
+            f"{log}: has neither labels (labels/<frame>.label) nor poses to score the pairs "
+            "of its run against; give TRUTH to score one job"
+        )
+    return scores
+
+
+def evaluate_pair_logs(args, logs):
+    """``mmreg evaluate`` of a --pairs run of logs: every pair of a log scored at once."""
+    chosen = logs
+    if args.job is not None:
+        chosen = {log: [job for job in jobs if job.name == args.job] for log, jobs in logs.items()}
+        chosen = {log: jobs for log, jobs in chosen.items() if jobs}
+        if not chosen:
+            names = [job.name for jobs in logs.values() for job in jobs]
+            shown = ", ".join(names[:5]) + (", ..." if len(names) > 5 else "")
+            raise CLIError(f"{args.pred_dir}: holds no job {args.job!r} (its jobs: {shown})")
+    rows = []
+    for log, jobs in chosen.items():
+        name = Path(log).name
+        rows.append({"log": name} | evaluate_pair_log(args.pred_dir, log, jobs))
+    return print_scores(rows, args)
+
+
+def print_scores(rows, args):
+    """The scores of one log as lines, of several as a table, or as JSON."""
     if args.json:
         clean = [
             {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
@@ -314,9 +482,10 @@ def evaluate_logs(args):
         print(json.dumps(clean if len(rows) > 1 else clean[0], indent=2))
         return 0
     if len(rows) > 1:
-        cells = [[name for _, name, _ in _TABLE]]
-        cells += [[_text(row.get(key), fmt) for key, _, fmt in _TABLE] for row in rows]
-        widths = [max(len(c[i]) for c in cells) for i in range(len(_TABLE))]
+        spec = [c for c in _TABLE if any(c[0] in row for row in rows)]
+        cells = [[name for _, name, _ in spec]]
+        cells += [[_text(row.get(key), fmt) for key, _, fmt in spec] for row in rows]
+        widths = [max(len(c[i]) for c in cells) for i in range(len(spec))]
         for number, cell in enumerate(cells):
             print("  ".join(c.rjust(w) for c, w in zip(cell, widths, strict=True)))
             if number == 0:
@@ -325,7 +494,8 @@ def evaluate_logs(args):
     (row,) = rows
     shown = [(k, n, f) for k, n, f in _LINES if k in row]
     width = max(len(name) for _, name, _ in shown)
-    print(f"{'log':<{width}}  {row['log']} ({plural(row['frames'], 'frame')})")
+    counted = plural(row["frames"], "frame") if "frames" in row else plural(row["pairs"], "pair")
+    print(f"{'log':<{width}}  {row['log']} ({counted})")
     for key, name, fmt in shown:
         print(f"{name:<{width}}  {_text(row[key], fmt)}")
     if row["poses_given"] and not math.isnan(row["rpe_m_mean"]):

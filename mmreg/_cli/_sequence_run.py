@@ -194,8 +194,13 @@ def run_sequences(args, jobs):
         pictures=args.pictures,
     )
     elapsed = time.perf_counter() - start
+    plan = summary.attrs.get("plan", {})
     record["timings"] = {
         "total_s": elapsed,
+        "where": plan.get("where"),
+        "workers": plan.get("workers"),
+        "why": plan.get("why"),
+        "cluster_start_s": plan.get("start_s", 0.0),
         "logs": {
             row["log"]: {
                 key: row[key]
@@ -208,11 +213,20 @@ def run_sequences(args, jobs):
     _write_record(out, record)
     failed = summary[summary["status"] != "done"]
     single = len(jobs) == 1 and not getattr(jobs[0], "folder", "")
+    verbose = getattr(args, "verbose", False)
     if not args.quiet:
         if single and not len(failed):
-            _print_log(out, summary.iloc[0], elapsed, resuming)
+            _print_log(out, summary.iloc[0], elapsed, resuming, plan, verbose)
         else:
-            _print_logs(summary, elapsed, resuming)
+            _print_logs(summary, elapsed, resuming, plan)
+        if verbose:
+            from mmreg._cli.dataset import print_plan, print_warnings
+
+            print_plan(plan, {"total_s": elapsed})
+            if "warnings" in summary:
+                print_warnings(summary["log"], summary["warnings"])
+        if plan.get("redrawn"):
+            print(f"{plural(plan['redrawn'], 'log')}' pictures drawn from the finished results")
     print(f"written: {_written(out, jobs, single)}")
     if len(failed):
         first = failed.iloc[0]
@@ -247,7 +261,7 @@ def _written(out, jobs, single):
     return f"{out}/ ({', '.join(parts)})"
 
 
-def _table(header, rows):
+def table(header, rows):
     """Right-aligned columns under a ruled header."""
     cells = [header] + rows
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
@@ -263,10 +277,12 @@ def _number(value, fmt):
     return "n/a" if _missing(value) else format(value, fmt)
 
 
-def _print_log(out, row, elapsed, resuming):
-    """One log: its tracks and frames as tables, then one line of totals."""
+def _print_log(out, row, elapsed, resuming, plan=None, verbose=False):
+    """One log: its tracks and frames as tables (every row with ``verbose``), then one
+    line of totals."""
     import pandas as pd
 
+    from mmreg._cli.dataset import where_line
     from mmreg.runner._logs import read_log_record
 
     record = read_log_record(out) or {}
@@ -278,7 +294,7 @@ def _print_log(out, row, elapsed, resuming):
     speed = next((c for c in tracks.columns if c.startswith("speed_")), None)
     if len(tracks):
         grouped = tracks.groupby("track")
-        table = pd.DataFrame(
+        by_track = pd.DataFrame(
             {
                 "frames": grouped["frame"].count(),
                 "first": grouped["frame"].min(),
@@ -287,10 +303,10 @@ def _print_log(out, row, elapsed, resuming):
                 "points": grouped["points"].mean(),
             }
         ).sort_values(["frames", "first"], ascending=[False, True])
-        shown = table.head(_TRACK_ROWS)
+        shown = by_track if verbose else by_track.head(_TRACK_ROWS)
         print(
-            f"tracks ({len(table)}"
-            + (f", the {len(shown)} seen longest" if len(table) > len(shown) else "")
+            f"tracks ({len(by_track)}"
+            + (f", the {len(shown)} seen longest" if len(by_track) > len(shown) else "")
             + "):"
         )
         rows = [
@@ -305,10 +321,11 @@ def _print_log(out, row, elapsed, resuming):
             for track, r in shown.iterrows()
         ]
         header = ["track", "frames", "first", "last", f"speed [{unit}]", "points"]
-        print(_table(header, rows))
+        print(table(header, rows))
     else:
         print("tracks: none")
-    step = max(1, math.ceil(len(frames) / _FRAME_ROWS))
+    step = 1 if verbose else max(1, math.ceil(len(frames) / _FRAME_ROWS))
+    static = _static_shares(frames)
     label = "frame" if step == 1 else f"frames (by {step})"
     rows = []
     for first in range(0, len(frames), step):
@@ -321,22 +338,41 @@ def _print_log(out, row, elapsed, resuming):
                 f"{block['moving_points'].mean():,.0f}",
                 f"{block['moving_objects'].mean():.{0 if step == 1 else 1}f}",
                 f"{block['tracks'].mean():.{0 if step == 1 else 1}f}",
+                _number(static[first : first + step].mean(), ".0%"),
                 f"{block['fit_s'].mean():.2f}",
             ]
         )
     print(f"{label}s:" if step == 1 else f"{label}:")
-    header = ["frame", "points", "moving points", "moving objects", "tracks", "fit [s]"]
-    print(_table(header, rows))
+    header = [
+        "frame", "points", "moving points", "moving objects", "tracks", "static world",
+        "fit [s]",
+    ]  # fmt: skip
+    print(table(header, rows))
     again = " (from an earlier run)" if resuming and bool(row.get("resumed")) else ""
     print(
         f"{plural(int(row['frames']), 'frame')}, {plural(int(row['tracks']), 'track')}, "
         f"{row['moving_objects_per_frame']:.1f} moving objects per frame, "
-        f"{_number(row['s_per_frame'], '.2f')} s per frame{again}; {elapsed:.1f} s in all"
+        f"{_number(row['s_per_frame'], '.2f')} s per frame{again}; {elapsed:.1f} s in all "
+        f"({where_line(plan or {})})"
     )
 
 
-def _print_logs(summary, elapsed, resuming):
+def _static_shares(frames):
+    """The static world's share of each frame's returns (the ego vehicle's body left
+    out); NaN for frames.csv of earlier versions, which lack the counts."""
+    import numpy as np
+
+    if "static_points" not in frames:
+        return np.full(len(frames), np.nan)
+    body = frames.get("ego_body_points", 0)
+    seen = (frames["returns"] - body).clip(lower=1)
+    return (frames["static_points"] / seen).to_numpy(float)
+
+
+def _print_logs(summary, elapsed, resuming, plan=None):
     """Several logs: one row each, then one line of totals."""
+    from mmreg._cli.dataset import where_line
+
     rows = []
     for row in summary.to_dict("records"):
         done = row["status"] == "done"
@@ -351,13 +387,13 @@ def _print_logs(summary, elapsed, resuming):
             ]
         )
     header = ["log", "status", "frames", "tracks", "moving/frame", "s/frame"]
-    print(_table(header, rows))
+    print(table(header, rows))
     failed = int((summary["status"] != "done").sum())
     resumed = int(summary["resumed"].fillna(False).astype(bool).sum())
     print(
         f"{plural(len(summary), 'log')}: {len(summary) - failed:,} done"
         + (f" ({resumed:,} from an earlier run)" if resuming and resumed else "")
-        + f", {failed:,} failed, {elapsed:.1f} s"
+        + f", {failed:,} failed, {elapsed:.1f} s ({where_line(plan or {})})"
     )
     changed = summary.get("changed_input")
     if changed is not None:

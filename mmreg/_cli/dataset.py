@@ -16,8 +16,10 @@ from mmreg._cli.register import TAU_RULE, _positive_int, _seed, _tau, resolve_ta
 NAME = "run"
 HELP = "process LiDAR logs (tracks per log) or a dataset of pairs on Dask"
 DESCRIPTION = """\
-Run the registration over DATASET as independent tasks on a Dask cluster: a LocalCluster
-on this machine by default, or the one at --scheduler.
+Run the registration over DATASET as independent tasks: in this process by default
+when a cluster would not pay (a single log, few jobs, no free core for a second worker:
+see "Where the work runs" below), else on a Dask LocalCluster on this machine, or on the
+cluster at --scheduler.
 
 A LiDAR log (a ROS bag, a KITTI or SemanticKITTI sequence, an Argoverse 2 log, a folder
 of frames) is registered by default as a whole by the sequence estimator
@@ -36,7 +38,7 @@ task. Written into --out (for a folder of logs, into --out/<log>/):
   - poses.txt: the sensor's pose of every frame in KITTI's format (the first the
     identity), as evo reads it;
   - frames.csv: one row per frame (its file, time, points, moving points and objects,
-    tracks, seconds);
+    tracks, points of the static world and of the ego body, seconds);
   - with --pictures, pictures/<frame>.png (every frame from above: moving points by
     track id with the ids and trails, the static world grey) and pictures/animation.gif;
   - Argoverse 2 logs also: av2_scene_flow/<log>/<timestamp_ns>.feather at the top of
@@ -45,9 +47,13 @@ task. Written into --out (for a folder of logs, into --out/<log>/):
   - log.json (written last: a log is done once it is there) and run.json (the options
     and the timings); for a folder of logs, summary.csv (one row per log).
 The log's poses (KITTI's poses.txt, Argoverse 2's ego poses) start each ego motion
-unless --no-poses. Run again after an interruption: a finished log whose files did not
-change is skipped. The console shows the tracks and the frames (moving objects, seconds
-per frame) of one log, a row per log of several; -q prints where the results went.
+unless --no-poses. The frames' times come from the log (KITTI's times.txt, a bag's
+header stamps, Argoverse 2's names, a .pcd's absolute time field), else --frame-rate;
+speeds are in m/s whenever they are known. Run again after an interruption: a finished
+log whose files did not change is skipped; --pictures given to a finished log draws its
+pictures from its files. The console shows the tracks and the frames (moving objects,
+the static world's share, seconds per frame) of one log, a row per log of several; -v
+every row, the warnings and where the work ran; -q only where the results went.
 'mmreg evaluate' and 'mmreg view' read the result.
 
 --pairs runs per-pair jobs instead, as below (also the default for a folder of
@@ -115,14 +121,23 @@ ICP (deskewing). Sweeps whose offsets are all zero are registered without;
 them, its ground column what became of the ground (masks, dropped, kept).
 
 Written into --out: jobs/<job>.npz per job (labels, rotations, translations, sigmas,
-flow, moving, indices: the rows of the first sweep's file the job fitted, so that
-labels[k] and flow[k] belong to row indices[k]; meta), each whole or not at all;
+flow, moving, static_cluster, indices: the rows of the first sweep's file the job
+fitted, so that labels[k] and flow[k] belong to row indices[k]; meta), each whole or not
+at all, compressed, labels as small integers and flows as float32, a sweep's flow of
+every row only where it is not the fit's own (mmreg.runner.read_job_result restores it;
+--full-arrays keeps every array whole);
 av2_scene_flow/<log>/<timestamp_ns>.feather per Argoverse 2 job: the flow of every point
 of the sweep in the scene-flow challenge's format (flow_tx_m, flow_ty_m, flow_tz_m,
 is_dynamic; dropped ground and outliers move with the static world), ready for the
 official evaluation; summary.parquet and summary.csv (one row per job: sizes, clusters,
-timings, status, what it was fitted on, and the scores when the truth is known); and
-run.json (the dataset and the options).
+timings, status, what it was fitted on, the static world's share, the fastest moving
+object, and the scores when the truth is known); pictures/<job>.png with --pictures
+(given to a finished run: the missing ones, drawn without fitting again); and run.json
+(the dataset, the options and the timings). The console shows a table of the jobs
+(points, moving objects, the static world's share, the fastest object in m/s where the
+interval is known, seconds), -v every job and the warnings, -q only where the results
+went. 'mmreg evaluate' scores a --pairs run of a LiDAR log against the log's own labels
+and poses, every pair at once.
 
 Run the same command again after an interruption (Ctrl-C, a crash, a lost worker): jobs
 whose complete result is in --out are skipped. A job records the size and modification
@@ -138,6 +153,14 @@ earlier run has no result at all (every job failed): that one is simply replaced
 
 With --scheduler, the workers must have mmreg installed and read DATASET at the same
 path (a shared file system); the results come back to this machine.
+
+Where the work runs: a Dask LocalCluster costs seconds to start (and every worker its
+imports), and workers beside jobs that keep several threads busy only take cores from
+them. By default the tasks run in this process unless at least two workers fit on the
+free cores (the cores less the load of other processes, over each task's own threads,
+the estimator's n_jobs) and, after the first task is timed here, the rest would take
+this process at least twice the cluster's start longer than the workers. --n-workers N
+starts N workers (0: in this process); run.json and -v say where it ran and why.
 """
 EPILOG = """\
 examples:
@@ -198,10 +221,12 @@ def add_arguments(parser):
     )
     parser.add_argument(
         "--n-workers",
-        type=_positive_int,
+        type=_workers,
         metavar="N",
         default=None,
-        help="worker processes of the LocalCluster (default: one per core)",
+        help="worker processes of a LocalCluster; 0: in this process, no cluster (default: "
+        "in this process for one log or few jobs, else one worker per free core and the "
+        "jobs' own threads, see above)",
     )
     parser.add_argument(
         "--method",
@@ -235,14 +260,15 @@ def add_arguments(parser):
         type=_frame_rate,
         metavar="HZ",
         default=None,
-        help="logs: frames per second, for velocities in m/s where the log has no times "
-        "(default: its times; without them, velocities per frame)",
+        help="frames per second where the log's frames have no times (nuScenes keyframes: "
+        "2): speeds in m/s, and the pairs' motions bounded (default: KITTI's times.txt, a "
+        "bag's header stamps, a .pcd's absolute time field; without them, m per frame)",
     )
     parser.add_argument(
         "--no-poses",
         dest="poses",
         action="store_false",
-        help="logs: do not start the ego motions from the log's poses (KITTI poses.txt, "
+        help="logs and pairs: do not start the ego motions from the log's poses (KITTI poses.txt, "
         "Argoverse 2 ego poses); register from the points alone, so that 'mmreg evaluate' "
         "compares the poses found with independent ones",
     )
@@ -295,7 +321,26 @@ def add_arguments(parser):
         action="store_true",
         help="run every job again, replacing an earlier run at --out (never other files)",
     )
-    parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar, no table")
+    parser.add_argument(
+        "--full-arrays",
+        action="store_true",
+        help="pairs: keep every array of a job whole in jobs/<job>.npz (float64 flow, "
+        "int64 labels, the sweep's flow of every row) instead of the compact default "
+        "(integers, float32, the sweep's flow only where it is not the fit's own)",
+    )
+    parser.add_argument(
+        "--quiet",
+        "-q",
+        action="store_true",
+        help="no progress bar, no table: only where the results went",
+    )
+    parser.add_argument(
+        "--verbose",
+        "-v",
+        action="store_true",
+        help="every row of the tables (no grouping), each job's or log's warnings, and where "
+        "the work ran (this process or a cluster, and why) with its timings",
+    )
 
 
 def _pairs(text):
@@ -305,6 +350,16 @@ def _pairs(text):
             "after DATASET)"
         )
     return text
+
+
+def _workers(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number; got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 (in this process) or more; got {value}")
+    return value
 
 
 def _frame_rate(text):
@@ -334,7 +389,16 @@ def _configuration(args):
         "max_iter": args.max_iter,
         "seed": args.seed,
         "mmreg": __version__,
-    } | ({} if getattr(args, "pattern", None) is None else {"pattern": args.pattern})
+    } | {
+        key: value
+        for key, value in (
+            ("pattern", getattr(args, "pattern", None)),
+            ("frame_rate", getattr(args, "frame_rate", None)),
+            ("poses", None if getattr(args, "poses", True) else False),
+            ("full_arrays", getattr(args, "full_arrays", False) or None),
+        )
+        if value is not None
+    }
 
 
 def _foreign(out):
@@ -465,6 +529,8 @@ def run(args):
             flow=args.flow,
             topic=args.topic,
             pattern=args.pattern,
+            frame_rate=args.frame_rate,
+            poses=args.poses,
         )
     lidar = args.pairs == "sweeps" or any(
         isinstance(job, (*_SWEEP_JOBS, Argoverse2PairJob)) for job in jobs
@@ -493,16 +559,28 @@ def run(args):
         n_workers=args.n_workers,
         progress=not args.quiet,
         pictures=args.pictures,
+        full_arrays=args.full_arrays,
     )
     elapsed = time.perf_counter() - start
+    plan = summary.attrs.get("plan", {})
+    record["timings"] = _timings(summary, elapsed, plan)
+    try:
+        with mmio.atomic_write(out / "run.json", "w") as handle:
+            handle.write(json.dumps(record, indent=2, default=str) + "\n")
+    except OSError as error:
+        raise CLIError(f"{out}: cannot be written: {one_line(error.strerror or error)}") from None
     failed = summary[summary["status"] != "done"]
     resumed = int(summary["resumed"].sum())
     if not args.quiet:
+        print_jobs(summary, verbose=args.verbose)
         print(
             f"{plural(len(summary), 'job')}: {len(summary) - len(failed):,} done"
             + (f" ({resumed:,} from an earlier run)" if resuming and resumed else "")
             + f", {len(failed):,} failed, {elapsed:.1f} s"
+            + f" ({where_line(plan)})"
         )
+        if args.verbose:
+            print_plan(plan, record["timings"])
         fed = int(summary["pairs"].eq("truth").sum()) if "pairs" in summary else 0
         if fed:
             print(
@@ -522,8 +600,10 @@ def run(args):
                 f"{plural(len(changed), 'job')} run again: a file read changed since the "
                 f"earlier run (e.g. {first['job']}: {first['changed_input']})"
             )
-        flows = ", av2_scene_flow/" if (out / "av2_scene_flow").is_dir() else ""
-        print(f"written: {out}/ (jobs/{flows}, summary.parquet, summary.csv, run.json)")
+        redrawn = plan.get("redrawn", 0)
+        if redrawn:
+            print(f"{plural(redrawn, 'picture')} of finished jobs drawn (--pictures)")
+    print(f"written: {_written(out)}")
     if len(failed):
         first = failed.iloc[0]
         print(
@@ -533,3 +613,125 @@ def run(args):
         )
         return 1
     return 0
+
+
+def _written(out):
+    """The run's folder and everything it holds, by name."""
+    parts = []
+    if (out / "jobs").is_dir():
+        n = sum(1 for _ in (out / "jobs").glob("*.npz"))
+        parts.append(f"jobs/ ({plural(n, 'job')})")
+    if (out / "av2_scene_flow").is_dir():
+        parts.append("av2_scene_flow/")
+    if (out / "pictures").is_dir():
+        n = sum(1 for _ in (out / "pictures").glob("*.png"))
+        parts.append(f"pictures/ ({plural(n, 'picture')})")
+    parts += ["summary.parquet", "summary.csv", "run.json"]
+    return f"{out}/ ({', '.join(parts)})"
+
+
+def _seconds(value):
+    import math
+
+    return None if value is None or (isinstance(value, float) and math.isnan(value)) else value
+
+
+def _timings(summary, elapsed, plan):
+    """run.json's timings: the whole run, where it ran, and the jobs' seconds."""
+    done = summary[(summary["status"] == "done") & ~summary["resumed"].astype(bool)]
+    load = float(done["load_s"].sum()) if "load_s" in done else 0.0
+    fit = float(done["fit_s"].sum()) if "fit_s" in done else 0.0
+    return {
+        "total_s": elapsed,
+        "where": plan.get("where"),
+        "workers": plan.get("workers"),
+        "why": plan.get("why"),
+        "cluster_start_s": plan.get("start_s", 0.0),
+        "jobs_run": int(len(done)),
+        "jobs_resumed": int(summary["resumed"].astype(bool).sum()),
+        "load_s": load,
+        "fit_s": fit,
+        "s_per_job": _seconds((load + fit) / len(done)) if len(done) else None,
+    }
+
+
+def where_line(plan):
+    """Where the work ran, in a few words."""
+    where = plan.get("where", "this process")
+    if where == "this process":
+        return "in this process"
+    if where == "local cluster":
+        return f"on {plural(plan.get('workers') or 0, 'worker')}"
+    return f"on {where}"
+
+
+def print_plan(plan, timings):
+    """-v: where the work ran and why, and its seconds."""
+    line = f"ran {where_line(plan)}"
+    if plan.get("why"):
+        line += f" ({plan['why']})"
+    if plan.get("start_s"):
+        line += f"; the cluster took {plan['start_s']:.1f} s to start"
+    print(line)
+    parts = [
+        f"{k.removesuffix('_s')} {v:.1f} s"
+        for k, v in timings.items()
+        if k in ("load_s", "fit_s") and v is not None
+    ]
+    if parts:
+        print("seconds: " + ", ".join(parts) + f", {timings['total_s']:.1f} s in all")
+
+
+# Rows of the jobs' table at most; more are grouped (every n-th job's range).
+_JOB_ROWS = 40
+
+
+def print_jobs(summary, *, verbose=False):
+    """The jobs as a short table: points, moving objects, the static world's share of the
+    returns, the fastest moving object, seconds; groups of jobs when there are many
+    (every job with ``verbose``), then each job's warnings with ``verbose``."""
+    import math
+
+    from mmreg._cli._sequence_run import table
+
+    done = summary[summary["status"] == "done"]
+    if not len(done):
+        return
+    unit = "m/s"
+    if "speed_unit" in done and done["speed_unit"].eq("m/frame").any():
+        unit = "m/frame" if done["speed_unit"].eq("m/frame").all() else "m/s or m/frame"
+    step = 1 if verbose else max(1, math.ceil(len(done) / _JOB_ROWS))
+    rows = []
+    for first in range(0, len(done), step):
+        block = done.iloc[first : first + step]
+        name = str(block["job"].iloc[0]) + ("" if step == 1 else f"-{block['job'].iloc[-1]}")
+        digits = 0 if step == 1 else 1
+        speed = block["max_speed"].max() if "max_speed" in block else math.nan
+        share = block["static_share"].mean() if "static_share" in block else math.nan
+        rows.append(
+            [
+                name,
+                f"{block['n'].mean():,.0f}",
+                f"{block['n_moving'].clip(lower=0).mean():.{digits}f}",
+                "n/a" if math.isnan(share) else f"{share:.0%}",
+                "n/a" if math.isnan(speed) else f"{speed:.1f}",
+                f"{block['fit_s'].mean():.2f}",
+            ]
+        )
+    label = "job" if step == 1 else f"jobs (by {step})"
+    print(f"{label}s:" if step == 1 else f"{label}:")
+    header = ["job", "points", "moving objects", "static world", f"fastest [{unit}]", "fit [s]"]
+    print(table(header, rows))
+    if verbose and "warnings" in summary:
+        print_warnings(summary["job"], summary["warnings"])
+
+
+def print_warnings(names, warnings):
+    """-v: each warning once, with the jobs (or logs) that gave it."""
+    by_text = {}
+    for name, text in zip(names, warnings, strict=True):
+        if isinstance(text, str) and text:
+            by_text.setdefault(text, []).append(str(name))
+    for text, which in by_text.items():
+        shown = which[0] if len(which) == 1 else f"{which[0]} and {len(which) - 1} more"
+        print(f"{shown}: warning: {text}")

@@ -29,7 +29,9 @@ Score RESULT against the ground truth. RESULT is
     --job;
   - one job's file of a run, RUN/jobs/<job>.npz (its labels, motions and flow);
   - an "mmreg run" folder of a log, or of a folder of logs (a table, one row per log, or
-    the log named by --job), scored against the log itself: the moving-object IoU of
+    the log named by --job), scored against the log itself (runs with --pairs too, every
+    pair at once: the moving rows are those of the clusters found moving, and the pose
+    error is that of each pair's static-world motion): the moving-object IoU of
     LiDAR-MOS where the log has labels (labels/<frame>.label beside its frames, in
     SemanticKITTI's uint32 or a nuScenes conversion's uint8; unlabelled points and the
     ego body are left out), the tracking scores where the labels carry instance ids,
@@ -401,10 +403,18 @@ def _text(value, fmt):
 def run(args):
     import pandas as pd
 
-    from mmreg._cli._sequence_results import evaluate_logs, is_log_result
+    from mmreg._cli._sequence_results import (
+        evaluate_logs,
+        evaluate_pair_logs,
+        is_log_result,
+        pair_log_run,
+    )
 
     if is_log_result(args.pred_dir):
         return evaluate_logs(args)
+    logs = pair_log_run(args.pred_dir) if args.truth is None else None
+    if logs:  # --pairs on LiDAR logs: every pair at once, against the logs themselves
+        return evaluate_pair_logs(args, logs)
     results = open_results(args.pred_dir, job=args.job, every_job=args.truth is None)
     rows = []
     for result in results:

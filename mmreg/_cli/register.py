@@ -95,11 +95,16 @@ the ICP on S (SweepRegistration); the static world and the scene flow's conventi
 point as captured, moved by its object's motion between the reference times) are as
 without.
 
+The interval between the frames comes from their own times where they have them (a
+KITTI sequence's times.txt, a bag's header stamps, two .pcd files' absolute time field:
+t, time, timestamp or offset_time), else from --interval, or --frame-rate HZ (its
+inverse: nuScenes keyframes, 2 Hz); with it the table gives speeds in m/s.
+
 Motion bounds (two raw sweeps): an object's motion relative to the static world must be
 one a vehicle or a person can make. When the interval between the sweeps is known
-(--interval alone, capture times, or a sequence's timestamps), no faster than 50 m/s and
-no turn faster than 90 deg/s (360 deg/s for a cluster no longer than a person, 1.2 m
-across); else no farther than --max-displacement. Always: no level sheet sliding along
+(--interval or --frame-rate alone, capture times, or the frames' timestamps), no faster
+than 50 m/s and no turn faster than 90 deg/s (360 deg/s for a cluster no longer than a
+person, 1.2 m across); else no farther than --max-displacement. Always: no level sheet sliding along
 itself (a sliver of terrain). A cluster that breaks a
 bound is taken apart: its points rejoin the static world where its motion explains them,
 else they are outliers. The lengths scale with --tau (5: metres). The table gives each
@@ -377,6 +382,14 @@ def _add_sweep_options(parser):
         metavar="SECONDS",
         help="seconds between the two sweeps' reference times (e.g. 0.1 at 10 Hz); alone, "
         "it bounds the objects' speeds and turns (see above)",
+    )
+    timing.add_argument(
+        "--frame-rate",
+        type=_positive_float,
+        metavar="HZ",
+        default=None,
+        help="frames per second, where the frames have no times of their own (nuScenes "
+        "keyframes: 2): the interval 1/HZ, for speeds in m/s and the motion bounds",
     )
 
 
@@ -686,7 +699,39 @@ def read_sweep(args):
                 f"({first} ns); give --interval"
             )
         args.sweep_interval = (second - first) * 1e-9
+    if getattr(args, "interval", None) is None and getattr(args, "sweep_interval", None) is None:
+        # Two .pcd files with an absolute time field: the seconds between their stamps.
+        first_stamp = _pcd_stamp(args.input)
+        second_stamp = _pcd_stamp(sweep) if first_stamp is not None else None
+        if second_stamp is not None:
+            args.sweep_interval = interval_between(first_stamp, second_stamp, sweep)
+            args.stamped_interval = True
     return points
+
+
+def _frame_rate_interval(args, sweep, *, before):
+    """--frame-rate's interval, where the frames give none (their stamps win): set as
+    --interval for two sweeps or a sequence (it bounds the motions); for correspondences
+    True, to be set after the capture-time checks (their speeds only)."""
+    rate = getattr(args, "frame_rate", None)
+    if rate is None or getattr(args, "interval", None) is not None:
+        return False
+    if getattr(args, "sweep_interval", None) is not None:
+        return False  # the frames' own stamps
+    if sweep is not None or is_sequence(args.input):
+        args.interval = 1.0 / rate
+        return False
+    return True
+
+
+def _pcd_stamp(path):
+    """A .pcd file's timestamp (its absolute time field), else None."""
+    from mmreg.io._correspondences import _read_point_file
+
+    if path is None or Path(path).suffix.lower() != ".pcd" or not Path(path).is_file():
+        return None
+    with reading(path):
+        return _read_point_file(path, "the points", stamp=True)[3]
 
 
 _TIME_OPTIONS = (("times", "--times"), ("sweep_times", "--sweep-times"), ("interval", "--interval"))
@@ -756,8 +801,10 @@ def read_capture_times(args, n, m):
         # sequence's stamps give it (two files' names alone are no frame rate: an AV2
         # name is a timestamp only in a real log, whose sweeps carry their times).
         source = getattr(args, "input", None)
-        known = getattr(args, "interval", None) is not None or (
-            source is not None and is_sequence(source)
+        known = (
+            getattr(args, "interval", None) is not None
+            or getattr(args, "stamped_interval", False)
+            or (source is not None and is_sequence(source))
         )
         if not timing and interval is not None and known:
             args.interval = interval  # for run.json and the speeds of the picture
@@ -865,7 +912,10 @@ def register(
     start = time.perf_counter()
     init_used = init_name(args, X)
     sweep = read_sweep(args)
+    pairs_only = _frame_rate_interval(args, sweep, before=True)
     timing = read_capture_times(args, len(X), None if sweep is None else len(sweep))
+    if pairs_only:  # correspondences: the interval gives their speeds only
+        args.interval = 1.0 / args.frame_rate
     no_returns = None
     if sweep is not None:  # rows with no return (NaN, the origin) are dropped, and counted
         no_returns = NoReturns(X, sweep)
@@ -983,7 +1033,7 @@ TABLE = [
     ("size", "points", ",d"),
     ("rotation_angle_deg", "rotation [deg]", ".3f"),
     ("displacement", "moved", ".3f"),
-    ("speed", "speed", ".3g"),
+    ("speed", "speed [m/s]", ".3g"),
     ("residual_scale", "residual", ".3g"),
     ("displacement_vs_background", "vs background", ".3f"),
     ("moving", "moving", ""),
@@ -1011,6 +1061,8 @@ def run(args):
     if args.out is None:
         args.out = default_out(args)
     check_out(args.out, overwrite=args.overwrite)  # before any work
+    if getattr(args, "frame_rate", None) is not None and args.interval is not None:
+        raise CLIError("--interval and --frame-rate say the same (seconds = 1 / HZ); give one")
     check_time_options(args)
     check_sequence_options(args)
     if args.paper and getattr(args, "voxel_size", None) not in (None, "auto"):

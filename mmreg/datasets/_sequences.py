@@ -63,7 +63,9 @@ Kinds
     a folder of frame files of one kind (``*.ply``, ``*.pcd``, ``*.xyz``, ``*.npy``,
     ``*.bin``, ``*.pcd.bin``, ``*.feather``) in natural name order (``frame2`` before
     ``frame10``); ``pattern=`` (a glob) picks one kind when the folder holds several.
-    ``timestamp`` None; ``times`` from a ``.feather``'s ``offset_ns``.
+    ``timestamp`` from a ``.pcd``'s absolute per-point time field (``t``, ``time``,
+    ``timestamp`` or ``offset_time``: its earliest point's), else None; ``times`` from a
+    ``.feather``'s ``offset_ns``.
 
 Examples
 --------
@@ -184,10 +186,10 @@ def _pose_of(sequence, k):
     return None if poses is None else poses[k].copy()
 
 
-def _read_frame_file(path):
+def _read_frame_file(path, stamp=False):
     path = _check_readable(path, "a frame")
-    points, _, times = _read_point_file(path, "the points")
-    return points, times
+    points, _, times, when = _read_point_file(path, "the points", stamp=True)
+    return (points, times, when) if stamp else (points, times)
 
 
 def _natural_key(name):
@@ -477,8 +479,8 @@ class FrameFolder(_Sequence):
         self._files = [self.path / name for name in self.names]
 
     def _frame(self, k):
-        points, times = _read_frame_file(self._files[k])
-        return Frame(points, None, times, k, str(self._files[k]))
+        points, times, stamp = _read_frame_file(self._files[k], stamp=True)
+        return Frame(points, stamp, times, k, str(self._files[k]))
 
 
 # --------------------------------------------------------------------------- the factory

@@ -263,8 +263,39 @@ def _lzf_decompress(data, size, source):
 _PCD_TYPES = {"F": "f", "U": "u", "I": "i"}
 
 
-def _parse_pcd(data, source):
-    """Points and colours of a PCD file (ascii, binary, binary_compressed), strictly."""
+# A PCD's per-point time fields, as a PointCloud2's (mmreg.io._lidar): Ouster "t",
+# velodyne_pointcloud "time", Hesai / Robosense "timestamp", Livox "offset_time".
+_PCD_TIME_FIELDS = ("t", "time", "timestamp", "offset_time")
+# Float seconds beyond this are absolute (since 1970), not after the sweep's start; integer
+# nanoseconds beyond this (about 11.6 days) likewise.
+_ABSOLUTE_SECONDS = 1e6
+_ABSOLUTE_NANOSECONDS = 1e15
+
+
+def _pcd_timestamp(fields, source):
+    """The sweep's time in seconds (float) from a PCD's absolute per-point time field: its
+    earliest finite point's; None without such a field, when its times are relative
+    (seconds or nanoseconds after a stamp the file does not hold) or absolute seconds in
+    32-bit floats (rounded to minutes: no stamp)."""
+    name = next((n for n in _PCD_TIME_FIELDS if n in fields), None)
+    if name is None:
+        return None
+    raw = np.asarray(fields[name])
+    if raw.dtype.kind == "f":
+        finite = raw[np.isfinite(raw)].astype(np.float64)
+        if not len(finite) or np.max(np.abs(finite)) <= _ABSOLUTE_SECONDS:
+            return None
+        if raw.dtype.itemsize < 8:  # 32-bit seconds since 1970 are rounded to minutes
+            return None
+        return float(finite.min())
+    if raw.dtype.kind in "iu" and len(raw) and int(raw.max()) > _ABSOLUTE_NANOSECONDS:
+        return int(raw.min()) * 1e-9
+    return None
+
+
+def _parse_pcd(data, source, *, stamp=False):
+    """Points and colours of a PCD file (ascii, binary, binary_compressed), strictly; with
+    ``stamp``, also its timestamp (:func:`_pcd_timestamp`)."""
     lines, offset = _header_lines(data, source, "DATA", "PCD")
     header = {}
     for line in lines:
@@ -375,6 +406,8 @@ def _parse_pcd(data, source):
             packed = packed.view("<u4")
             rgb = np.column_stack([(packed >> s) & 0xFF for s in (16, 8, 0)]) / 255.0
             break
+    if stamp:
+        return points, rgb, _pcd_timestamp(fields, source)
     return points, rgb
 
 

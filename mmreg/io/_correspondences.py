@@ -24,15 +24,22 @@ from mmreg.io._checks import (
 from mmreg.io._cloud_formats import _parse_pcd, _parse_ply
 
 
-def _read_cloud_file(path, *, colors=False):
-    """Points (and colours or None) of a ``.ply``, ``.pcd`` or ``.xyz`` file."""
+def _read_cloud_file(path, *, colors=False, stamp=False):
+    """Points (and colours or None) of a ``.ply``, ``.pcd`` or ``.xyz`` file; with
+    ``stamp``, also its timestamp (a ``.pcd``'s absolute time field, else None)."""
     suffix = Path(path).suffix.lower()
     data = _read_bytes(path)
+    when = None
     if suffix == ".xyz":
-        return _parse_text_table(data, path), None
-    points, rgb = (_parse_ply if suffix == ".ply" else _parse_pcd)(data, path)
+        points, rgb = _parse_text_table(data, path), None
+    elif suffix == ".ply":
+        points, rgb = _parse_ply(data, path)
+    else:
+        points, rgb, when = _parse_pcd(data, path, stamp=True)
     if len(points) == 0:
         raise ValueError(f"{path}: holds no points (its header declares 0).")
+    if stamp:
+        return points, (rgb if colors else None), when
     return points, (rgb if colors else None)
 
 
@@ -48,34 +55,39 @@ def _check_lidar_points(points, source, name):
     return np.ascontiguousarray(points)
 
 
-def _read_point_file(path, name, *, colors=False):
-    """``(points, rgb or None, times or None)`` of any point file (checked readable).
+def _read_point_file(path, name, *, colors=False, stamp=False):
+    """``(points, rgb or None, times or None)`` of any point file (checked readable); with
+    ``stamp``, also the frame's timestamp in seconds or None (a ``.pcd``'s absolute time
+    field: ``t``, ``time``, ``timestamp`` or ``offset_time``, as a PointCloud2's).
 
     Clouds and arrays must be finite; LiDAR sweep files and ``.pcd`` clouds keep their
     rows without a return (NaN).
     """
     suffix = _extension(path, _POINT_EXTENSIONS, name)
     kind = _lidar_files.lidar_kind(path)
+    when = None
     if kind is not None:
         points, times, _ = _lidar_files.read_lidar_file(path, kind)
-        return _check_lidar_points(points, path, name), None, times
-    rgb = None
-    if suffix == ".pcd":
+        found = _check_lidar_points(points, path, name), None, times
+    elif suffix == ".pcd":
         # PCL writes a sensor's missing returns as NaN rows (an organised cloud keeps
         # its grid, HEIGHT > 1; a driver's is_dense false), which stay in place as a
         # LiDAR file's do; infinity is still refused.
-        points, rgb = _read_cloud_file(path, colors=colors)
+        points, rgb, when = _read_cloud_file(path, colors=colors, stamp=True)
         points = _check_lidar_points(points, path, name)
         if np.isinf(points).any():
             _check_points(points, path, 3, name)  # raises, naming the rows
-        return points, rgb, None
-    if suffix in _CLOUD_EXTENSIONS:
-        points, rgb = _read_cloud_file(path, colors=colors)
-    elif suffix == ".npy":
-        points = _load_npy(path)
+        found = points, rgb, None
     else:
-        points = _load_text_table(path)
-    return _check_points(points, path, 3, name), rgb, None
+        rgb = None
+        if suffix in _CLOUD_EXTENSIONS:
+            points, rgb = _read_cloud_file(path, colors=colors)
+        elif suffix == ".npy":
+            points = _load_npy(path)
+        else:
+            points = _load_text_table(path)
+        found = _check_points(points, path, 3, name), rgb, None
+    return (*found, when) if stamp else found
 
 
 def _read_points(path, name):

@@ -1,27 +1,31 @@
-"""Run an estimator over a dataset: independent jobs on Dask, resumable, one file per job.
+"""Run an estimator over a dataset: independent jobs, resumable, one file per job.
 
 :func:`run_dataset` fits a copy of the estimator on every job of a dataset (see
-:func:`dataset_jobs`) on a Dask cluster through joblib's ``"dask"`` backend (the
-machinery ``paper/`` sweeps with), writes each job's result into ``OUT/jobs/<name>.npz``
-whole or not at all, skips the jobs whose complete result is already there (of the same
-job, estimator and input files: a job records the size and modification time of every
-file it reads, ``job.inputs()``, and runs again when one changed), and ends with a
-summary table, one row per job (``OUT/summary.parquet`` and ``summary.csv``).
+:func:`dataset_jobs`), in this process or on a Dask cluster through joblib's ``"dask"``
+backend (the machinery ``paper/`` sweeps with; :mod:`mmreg.runner._workers` chooses),
+writes each job's result into ``OUT/jobs/<name>.npz`` whole or not at all, skips the
+jobs whose complete result is already there (of the same job, estimator and input files:
+a job records the size and modification time of every file it reads, ``job.inputs()``,
+and runs again when one changed), and ends with a summary table, one row per job
+(``OUT/summary.parquet`` and ``summary.csv``).
 
-Each result ``.npz`` holds ``labels``, ``rotations``, ``translations``, ``sigmas``,
-``flow`` (the rigid flow, :attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when
-the estimator reports it), ``indices`` and ``meta``: a JSON string with the job's summary
-row and the fingerprint of (job, estimator) the result belongs to. ``indices`` (n,) are
-the rows of the job's input the fit saw: for a LiDAR sweep pair, the rows of the first
-sweep's file (``--ground drop`` leaves the ground rows out), so ``labels[k]`` and
-``flow[k]`` belong to row ``indices[k]`` of the sweep as the file holds it;
-``arange(n)`` for frames and correspondence files. Rows that hold no return (NaN, or
+Each result ``.npz`` (compressed) holds ``labels`` (the smallest integer type),
+``rotations``, ``translations``, ``sigmas``, ``flow`` (float32: the rigid flow,
+:attr:`~mmreg.MultiModelRegistration.flow_`), ``moving`` (when the estimator reports
+it), ``static_cluster`` (the static world's cluster), ``indices`` and ``meta``: a JSON
+string with the job's summary row and the fingerprint of (job, estimator) the result
+belongs to. ``indices`` (n,) are the rows of the job's input the fit saw: for a LiDAR
+sweep pair, the rows of the first sweep's file (``--ground drop`` leaves the ground rows
+out), so ``labels[k]`` and ``flow[k]`` belong to row ``indices[k]`` of the sweep as the
+file holds it; ``arange(n)`` for frames and correspondence files. Rows that hold no return (NaN, or
 several all-zero rows: a bag with ``is_dense`` false, an organised cloud, a KITTI scan)
 are left out of every job, in both sweeps, and counted (``n_no_return``). A fit that
 finds the ego vehicle's own body (:attr:`~mmreg.SweepRegistration.ego_body_mask_`)
 stores ``ego_body`` (bool, one per label): those rows are labelled -1 but are no
 outliers (``n_ego_body`` counts them apart). A sweep
-pair also stores ``sweep_flow`` (float32, one row per row of the file),
+pair also stores ``sweep_flow`` (float32, one row per row of the file; the file keeps
+only its rows that are not the fit's own flow, ``sweep_flow_rest`` with the mask
+``sweep_flow_own``, and :func:`read_job_result` restores it whole),
 ``sweep_dynamic`` (bool) and ``sweep_valid`` (bool): the flow of every row, the rows the
 fit did not see (or left without a motion: outliers) moving with the fitted static
 world, whether it moves 0.05 m or more beyond that motion (the Argoverse 2 challenge's
@@ -97,6 +101,7 @@ from mmreg.runner._jobs import (
     dataset_jobs,
 )
 from mmreg.runner._logs import LogJob, fit_log, log_jobs, run_logs
+from mmreg.runner._workers import run_tasks, task_threads
 
 __all__ = [
     "Argoverse2PairJob",
@@ -268,19 +273,49 @@ def _metrics(X, estimator, data):
     return scores
 
 
-def _static_motion(model):
-    """Rotation and translation of the fitted static world (the largest cluster if unnamed).
-
-    No cluster at all: the identity (every point stays where it is).
-    """
+def _static_cluster(model):
+    """The fitted static world's cluster: the estimator's ``static_cluster_``, else the
+    largest cluster; -1 when there is no cluster at all."""
     if len(model.rotations_) == 0:
-        return np.eye(3), np.zeros(3)
+        return -1
     static = getattr(model, "static_cluster_", None)
     if static is None or static < 0:
         labels = np.asarray(model.labels_)
         counts = np.bincount(labels[labels >= 0], minlength=len(model.rotations_))
         static = int(np.argmax(counts)) if counts.size else 0
+    return int(static)
+
+
+def _static_motion(model):
+    """Rotation and translation of the fitted static world (the largest cluster if unnamed).
+
+    No cluster at all: the identity (every point stays where it is).
+    """
+    static = _static_cluster(model)
+    if static < 0:
+        return np.eye(3), np.zeros(3)
     return np.asarray(model.rotations_)[static], np.asarray(model.translations_)[static]
+
+
+def _moving_speeds(X, model, static, interval):
+    """The speed of every moving cluster's centroid relative to the static world: metres
+    per second over ``interval``, else metres per frame (an empty array without any)."""
+    moving = getattr(model, "moving_", None)
+    labels = np.asarray(model.labels_)
+    if moving is None or static < 0:
+        return np.zeros(0)
+    rotations, translations = np.asarray(model.rotations_), np.asarray(model.translations_)
+    R0, t0 = rotations[static], translations[static]
+    speeds = []
+    for k in np.flatnonzero(np.asarray(moving, bool)):
+        rows = labels == k
+        if k == static or not rows.any():
+            continue
+        centre = np.asarray(X, float)[rows, :3].mean(axis=0)
+        # Where the object went against where the static world's motion would take it.
+        speeds.append(np.linalg.norm(rotations[k] @ centre + translations[k] - (R0 @ centre + t0)))
+    speeds = np.asarray(speeds, float)
+    return speeds / interval if interval else speeds
 
 
 def sweep_flow(points, indices, flow, rotation, translation, ego_body=None):
@@ -511,15 +546,24 @@ def _process(job, estimator, pictures=False):
             row["ground"] = "dropped" if dropped else "found"
             row["n_ground"] = int(np.count_nonzero(found))
         row.update(_metrics(X, model, data))
+        static = _static_cluster(model)
+        labels = np.asarray(model.labels_)
+        # The static world's share of the returns the fit saw (the ego body left out).
+        seen = max(1, len(X) - int(body.sum()))
+        row["static_share"] = np.count_nonzero(labels == static) / seen if static >= 0 else 0.0
+        speeds = _moving_speeds(X, model, static, params.get("interval"))
+        row["max_speed"] = float(speeds.max()) if len(speeds) else math.nan
+        row["speed_unit"] = "m/s" if params.get("interval") else "m/frame"
         indices = data.get("indices")
         indices = np.arange(len(X)) if indices is None else np.asarray(indices, dtype=np.int64)
         arrays = {
-            "labels": model.labels_.astype(np.int64),
+            "labels": labels.astype(np.int64),
             "rotations": np.asarray(model.rotations_, dtype=float),
             "translations": np.asarray(model.translations_, dtype=float),
             "sigmas": np.asarray(model.sigmas_, dtype=float),
             "flow": np.asarray(model.flow_, dtype=float),
             "indices": indices,
+            "static_cluster": np.array(static, dtype=np.int64),
         }
         if moving is not None:
             arrays["moving"] = np.asarray(moving, dtype=bool)
@@ -541,6 +585,70 @@ def _process(job, estimator, pictures=False):
         row["error"] = f"{type(error).__name__}: {' '.join(str(error).split())}"[:1000]
         return job.name, None, row
     return job.name, arrays, row
+
+
+def _check_n_workers(n_workers):
+    if n_workers is not None and (
+        isinstance(n_workers, bool) or not isinstance(n_workers, int) or n_workers < 0
+    ):
+        raise ValueError(
+            f"n_workers must be a non-negative integer (0: in this process) or None; got "
+            f"{n_workers!r}."
+        )
+
+
+def _task(job, estimator, pictures, earlier=None):
+    """One task of a run: fit ``job`` (:func:`_process`), or with ``earlier`` (the arrays
+    and row of its finished result) draw its picture alone (:func:`_redraw`)."""
+    if earlier is None:
+        return _process(job, estimator, pictures)
+    return _redraw(job, *earlier)
+
+
+class _Stored:
+    """A finished job's result as :func:`_picture` reads a fitted estimator."""
+
+    def __init__(self, arrays):
+        self.labels_ = np.asarray(arrays["labels"], dtype=np.intp)
+        self.rotations_ = np.asarray(arrays["rotations"], dtype=float)
+        self.translations_ = np.asarray(arrays["translations"], dtype=float)
+        moving = arrays.get("moving")
+        self.moving_ = None if moving is None else np.asarray(moving, dtype=bool)
+        self.n_clusters_ = len(self.rotations_)
+
+
+def _fitted_points(data, indices):
+    """The points a job's fit saw, from its data loaded again: the rows ``indices`` of
+    the first sweep's file (``sweep_points``), else of the loaded ``X``."""
+    indices = np.asarray(indices, dtype=np.intp)
+    points = data.get("sweep_points")
+    if points is not None:
+        return np.asarray(points, dtype=float)[indices]
+    X = np.asarray(data["X"], dtype=float)
+    loaded = data.get("indices")
+    if loaded is None:
+        return X[indices]
+    loaded = np.asarray(loaded, dtype=np.intp)
+    order = np.argsort(loaded, kind="stable")
+    at = order[np.searchsorted(loaded, indices, sorter=order)]
+    if np.any(loaded[at] != indices):
+        raise ValueError("its input no longer holds the rows of its result (changed since?)")
+    return X[at]
+
+
+def _redraw(job, arrays, row):
+    """The picture of a finished job (``pictures`` asked of a run that had none): its
+    points loaded again, its result as stored; ``(name, {picture} or {error}, None)``."""
+    try:
+        data = job.load()
+        X = _fitted_points(data, arrays["indices"])
+        interval = row.get("interval")
+        interval = interval if interval and math.isfinite(interval) else None
+        body = arrays.get("ego_body")
+        png = _picture(X, _Stored(arrays), {"interval": interval}, job.name, body)
+    except Exception as error:  # the picture's failure is a note, not the job's
+        return job.name, {"picture_error": f"{type(error).__name__}: {error}"[:500]}, None
+    return job.name, {_PICTURE: np.frombuffer(png, dtype=np.uint8)}, None
 
 
 def _write_picture(out, name, png):
@@ -587,7 +695,7 @@ def read_job_result(path, fingerprint=None):
 def _read_result(path):
     """``(arrays, meta)`` of a complete result file, or None."""
     try:
-        arrays = _load_npz(path)
+        arrays = _expand(_load_npz(path))
         meta = json.loads(str(arrays.pop("meta")))
     except (OSError, ValueError, KeyError, TypeError):
         return None
@@ -627,13 +735,76 @@ def _changed_input(stamps, earlier):
     return ""
 
 
-def _write_result(path, arrays, row, fingerprint, inputs=None):
+def _small_int(values):
+    """Integers in the smallest signed type that holds them (labels, row numbers)."""
+    values = np.asarray(values)
+    if values.size == 0:
+        return values.astype(np.int32)
+    low, high = int(values.min()), int(values.max())
+    for kind in (np.int8, np.int16, np.int32):
+        if np.iinfo(kind).min <= low and high <= np.iinfo(kind).max:
+            return values.astype(kind)
+    return values.astype(np.int64)
+
+
+def _compact(arrays):
+    """A job's arrays as its file keeps them by default: labels and row numbers in the
+    smallest integer type, flows float32, and of ``sweep_flow`` (every row of the sweep's
+    file) only the rows that are not the fit's own flow (``sweep_flow_rest``, with the
+    mask ``sweep_flow_own`` of the others): :func:`_expand` restores it exactly. A
+    35k-point pair takes 0.33 MB (compressed) instead of 1.9 MB."""
+    out = dict(arrays)
+    for key in ("labels", "indices"):
+        out[key] = _small_int(arrays[key])
+    out["flow"] = np.asarray(arrays["flow"], dtype=np.float32)
+    if "sweep_flow" in arrays:
+        sweep = np.asarray(out.pop("sweep_flow"), dtype=np.float32)
+        indices = np.asarray(arrays["indices"], dtype=np.intp)
+        flow = out["flow"]
+        finite = np.all(np.isfinite(flow), axis=1)
+        own = np.zeros(len(sweep), bool)
+        rows = indices[finite]
+        own[rows] = np.all(sweep[rows] == flow[finite], axis=1)
+        out["sweep_flow_own"] = own
+        out["sweep_flow_rest"] = sweep[~own]
+    return out
+
+
+def _expand(arrays):
+    """The arrays of a job's file as :func:`_process` made them: labels and row numbers
+    int64 (arithmetic on int8 overflows), ``sweep_flow`` whole; flows stay float32."""
+    out = dict(arrays)
+    for key in ("labels", "indices"):
+        if key in out and np.asarray(out[key]).dtype.kind in "iu":
+            out[key] = np.asarray(out[key]).astype(np.int64)
+    if "sweep_flow_rest" not in arrays or "sweep_flow_own" not in arrays:
+        return out
+    own = np.asarray(out.pop("sweep_flow_own"), dtype=bool)
+    rest = np.asarray(out.pop("sweep_flow_rest"), dtype=np.float32)
+    flow = np.asarray(arrays["flow"], dtype=np.float32)
+    indices = np.asarray(arrays["indices"], dtype=np.intp)
+    if len(rest) != np.count_nonzero(~own) or len(flow) != len(indices):
+        raise ValueError("sweep_flow_rest does not fit sweep_flow_own")
+    sweep = np.empty((len(own), 3), dtype=np.float32)
+    sweep[~own] = rest
+    at = np.full(len(own), -1, dtype=np.intp)
+    at[indices] = np.arange(len(indices))
+    if np.any(at[own] < 0):
+        raise ValueError("sweep_flow_own marks a row the fit did not see")
+    sweep[own] = flow[at[own]]
+    out["sweep_flow"] = sweep
+    return out
+
+
+def _write_result(path, arrays, row, fingerprint, inputs=None, *, full=False):
+    """A job's file, compressed; compact (:func:`_compact`) unless ``full``."""
     from mmreg import io as mmio
 
     meta = {"fingerprint": fingerprint, "row": row, "inputs": inputs}
     meta = json.dumps(meta, default=_json_value)
+    arrays = arrays if full else _compact(arrays)
     with mmio.atomic_write(path) as handle:
-        np.savez(handle, **arrays, meta=np.array(meta))
+        np.savez_compressed(handle, **arrays, meta=np.array(meta))
 
 
 def write_scene_flow(path, flow, is_dynamic):
@@ -769,6 +940,7 @@ def run_dataset(
     overwrite=False,
     progress=True,
     pictures=False,
+    full_arrays=False,
 ):
     """Fit ``estimator`` on every job of a dataset on Dask; resumable, one file per job.
 
@@ -813,7 +985,11 @@ def run_dataset(
         Address of a running Dask scheduler (``"tcp://host:8786"``); None starts a
         :class:`distributed.LocalCluster` for the run.
     n_workers : int, default=None
-        Worker processes of the LocalCluster (None: one per core); ignored with
+        Worker processes of a LocalCluster; 0 runs the jobs in this process, without a
+        cluster; None chooses (:func:`mmreg.runner._workers.run_tasks`): this process
+        unless at least two workers fit on the free cores given each job's own threads
+        (the estimator's ``n_jobs``) and the jobs left after the first, timed here,
+        would take twice a cluster's start longer here than on them. Ignored with
         ``scheduler``.
     overwrite : bool, default=False
         Run every job again, replacing the results found in ``out``.
@@ -821,8 +997,14 @@ def run_dataset(
         A tqdm progress bar over the jobs on stderr.
     pictures : bool, default=False
         Also draw every job's result as ``mmreg view`` does (a LiDAR sweep from above)
-        into ``out/pictures/<name>.png``; drawn on the workers. Jobs already done are not
-        drawn again.
+        into ``out/pictures/<name>.png``, where the jobs run. A finished job without its
+        picture is drawn from its stored result and its points loaded again, not fitted
+        again.
+    full_arrays : bool, default=False
+        Keep every array of a job's file whole (float64 flow, int64 labels, the
+        sweep's flow of every row); by default the file keeps labels and rows in the
+        smallest integer type, flows as float32, and the sweep's flow only where it is
+        not the fit's own, which :func:`read_job_result` restores exactly.
 
     Returns
     -------
@@ -850,7 +1032,14 @@ def run_dataset(
         run again because a file it reads changed since the earlier result, that file;
         ``pairs``: what it was fitted on (``"sweeps"``, ``"flow"``, ``"truth"``,
         ``"correspondences"``) and ``truth_fed``: whether that was the ground-truth flow;
-        ``n_file``: rows of the first sweep's file.
+        ``n_file``: rows of the first sweep's file; ``static_share``: the share of the
+        fitted rows (the ego vehicle's body left out) in the static world's cluster;
+        ``max_speed``: the fastest moving cluster's centroid relative to the static
+        world, in ``speed_unit`` (``"m/s"`` when the interval is known, else
+        ``"m/frame"``); ``picture_error``: why a finished job's picture could not be
+        drawn. ``summary.attrs["plan"]`` says where the jobs ran (``where``,
+        ``workers``, ``start_s``: the cluster's start, ``why``, ``redrawn``: the
+        pictures of finished jobs drawn).
 
     Examples
     --------
@@ -891,14 +1080,13 @@ def run_dataset(
             f"{type(estimator).__name__}.fit takes no sweep; wrap it: "
             "SweepRegistration(estimator)."
         )
-    if n_workers is not None and (not isinstance(n_workers, int) or n_workers < 1):
-        raise ValueError(f"n_workers must be a positive integer or None; got {n_workers!r}.")
+    _check_n_workers(n_workers)
     out = Path(out)
     (out / JOBS_FOLDER).mkdir(parents=True, exist_ok=True)
     fingerprints = {job.name: _fingerprint(job, estimator) for job in jobs}
     # What each job reads, as it is now: a result of other inputs is run again.
     stamps = {job.name: _input_stamps(job) for job in jobs}
-    rows, todo, changed = {}, [], {}
+    rows, todo, changed, redraw = {}, [], {}, []
     for job in jobs:
         found = None
         if not overwrite:
@@ -917,37 +1105,66 @@ def run_dataset(
             relative = getattr(job, "challenge", "")
             if relative and not (out / SCENE_FLOW_FOLDER / relative).is_file():
                 _write_sweep_flow(out, job, found[0])
+            if pictures and not (out / PICTURES_FOLDER / f"{job.name}.png").is_file():
+                redraw.append((job, found))  # --pictures added to a finished run
     bar = tqdm(
-        total=len(jobs),
+        total=len(jobs) + len(redraw),
         initial=len(rows),
         disable=not progress,
         file=sys.stderr,
         unit="job",
         desc="mmreg run",
     )
+    by_name = {job.name: job for job in jobs}
+    tasks = [(job, None) for job in todo] + redraw
+
+    def handle(result):
+        name, arrays, row = result
+        if arrays is not None and _PICTURE in arrays:
+            _write_picture(out, name, arrays.pop(_PICTURE))
+        if row is None:  # a finished job's picture, drawn again
+            if arrays is None or "picture_error" in arrays:
+                rows[name]["picture_error"] = (arrays or {}).get("picture_error", "")
+        else:
+            if arrays is not None:
+                path = _result_path(out, name)
+                _write_result(path, arrays, row, fingerprints[name], stamps[name], full=full_arrays)
+                _write_sweep_flow(out, by_name[name], arrays)
+            rows[name] = row | {"resumed": False}
+            if changed.get(name):
+                rows[name]["changed_input"] = changed[name]
+        bar.update(1)
+        _interrupt.check()  # a Ctrl-C that a callback swallowed stops here
+
+    def here(chosen):
+        for job, earlier in chosen:
+            handle(_task(job, estimator, pictures, earlier))
+
+    def cluster(chosen, address, workers):
+        begin = time.perf_counter()
+        with _dask_backend(address, workers):
+            start_s = time.perf_counter() - begin
+            delayed = (joblib.delayed(_task)(job, estimator, pictures, e) for job, e in chosen)
+            parallel = joblib.Parallel(n_jobs=-1, return_as="generator_unordered")
+            for result in parallel(delayed):
+                handle(result)
+        return start_s
+
     with bar:
-        if todo:
-            with _dask_backend(scheduler, n_workers):
-                by_name = {job.name: job for job in todo}
-                tasks = (joblib.delayed(_process)(job, estimator, pictures) for job in todo)
-                parallel = joblib.Parallel(n_jobs=-1, return_as="generator_unordered")
-                for name, arrays, row in parallel(tasks):
-                    if arrays is not None and _PICTURE in arrays:
-                        _write_picture(out, name, arrays.pop(_PICTURE))
-                    if arrays is not None:
-                        path = _result_path(out, name)
-                        _write_result(path, arrays, row, fingerprints[name], stamps[name])
-                        _write_sweep_flow(out, by_name[name], arrays)
-                    rows[name] = row | {"resumed": False}
-                    if changed.get(name):
-                        rows[name]["changed_input"] = changed[name]
-                    bar.update(1)
-                    _interrupt.check()  # a Ctrl-C that a callback swallowed stops here
+        plan = run_tasks(
+            tasks,
+            here,
+            cluster,
+            scheduler=scheduler,
+            n_workers=n_workers,
+            threads=task_threads(estimator),
+        )
     frame = pd.DataFrame([rows[job.name] for job in jobs])
     columns = SUMMARY_COLUMNS + [c for c in frame.columns if c not in SUMMARY_COLUMNS]
     frame = frame.reindex(columns=columns)
-    for column in ("error", "changed_input"):
+    for column in ("error", "changed_input", "picture_error"):
         if column in frame:
             frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
     _write_table(frame, out)
+    frame.attrs["plan"] = plan | {"redrawn": len(redraw)}
     return frame

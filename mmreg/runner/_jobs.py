@@ -41,6 +41,7 @@ and ``sweep_ground`` (m,): the map's ground points. ``pairs`` says what the fit 
 
 import dataclasses
 import functools
+import math
 import os
 import re
 from collections import Counter
@@ -62,6 +63,7 @@ from mmreg.datasets._argoverse2 import (
 )
 from mmreg.io._arrays import _load_npz
 from mmreg.io._checks import _check_points
+from mmreg.io._correspondences import _read_point_file
 from mmreg.io._correspondences import _read_points as read_point_file
 
 __all__ = [
@@ -124,20 +126,51 @@ class FramePairJob:
 
 @dataclasses.dataclass(frozen=True)
 class SweepPairJob:
-    """Frame ``source`` and the next frame ``target`` as two raw sweeps (any sizes, orders)."""
+    """Frame ``source`` and the next frame ``target`` as two raw sweeps (any sizes, orders).
+
+    The seconds between them (``interval``: it bounds the objects' motions and gives
+    their speeds in m/s) come from the frames' own timestamps (a ``.pcd``'s absolute time
+    field), else from ``frame_rate`` (frames per second), else are unknown.
+    """
 
     name: str
     source: str
     target: str
+    frame_rate: float | None = None
 
     def inputs(self):
         """The files the job reads."""
         return (self.source, self.target)
 
     def load(self):
-        a = read_point_file(self.source, "the first sweep's points")
-        sweep = read_point_file(self.target, "the second sweep's points")
-        return {"X": a, "sweep": sweep, "pairs": "sweeps"}
+        a, _, _, first = read_point_file_stamped(self.source, "the first sweep's points")
+        sweep, _, _, second = read_point_file_stamped(self.target, "the second sweep's points")
+        data = {"X": a, "sweep": sweep, "pairs": "sweeps"}
+        interval = _interval(first, second, self.target, self.frame_rate)
+        if interval is not None:
+            data["interval"] = interval
+        return data
+
+
+def read_point_file_stamped(path, name):
+    """``(points, rgb, times, timestamp)`` of a point file (checked readable); the
+    timestamp from a ``.pcd``'s absolute time field, else None."""
+    from mmreg.io._checks import _check_readable
+
+    return _read_point_file(_check_readable(path), name, stamp=True)
+
+
+def _interval(first, second, where, frame_rate=None):
+    """Seconds between two frames' timestamps, else ``1 / frame_rate``, else None; a
+    second stamp not after the first is an error naming ``where``."""
+    if first is not None and second is not None:
+        if not second > first:
+            raise ValueError(
+                f"{where}: its timestamp ({second:.9f} s) is not after the previous "
+                f"frame's ({first:.9f} s)."
+            )
+        return float(second - first)
+    return None if frame_rate is None else 1.0 / float(frame_rate)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -494,7 +527,11 @@ class SequenceSweepPairJob:
     per-point ``times`` (a bag's ``t`` / ``time`` field) and the interval between their
     timestamps; with the sequence's poses (a KITTI ``poses.txt``), ``ego_motion``: the
     static world's motion between the frames, ``(rotation, translation)``, the ICP's
-    start. No ground map (``ground`` goes to the estimator: ``ground_choice``), no truth.
+    start (unless ``poses`` is False). Without capture times, the interval between the
+    frames' timestamps (KITTI's ``times.txt``, a bag's header stamps, a ``.pcd``'s
+    absolute time field), else ``1 / frame_rate``, bounds the objects' motions and gives
+    their speeds in m/s. No
+    ground map (``ground`` goes to the estimator: ``ground_choice``), no truth.
     ``files``: the files it reads (its two frames, a KITTI sequence's poses, calibration
     and times), for :meth:`inputs`.
     """
@@ -507,6 +544,8 @@ class SequenceSweepPairJob:
     topic: str | None = None
     pattern: str | None = None
     files: tuple = ()
+    frame_rate: float | None = None
+    poses: bool = True
 
     def inputs(self):
         """The files the job reads (a bag: its file, or every file of a ROS 2 bag folder)."""
@@ -545,11 +584,13 @@ class SequenceSweepPairJob:
         )
         data["indices"] = np.flatnonzero(valid)[data["indices"]]
         data["sweep_points"] = first.points
-        if getattr(sequence, "poses", None) is not None:
+        if self.poses and getattr(sequence, "poses", None) is not None:
             motion = sequence.ego_motion(self.index, self.index + 1)
             data["ego_motion"] = (motion[:3, :3], motion[:3, 3])
-        if not timed and first.timestamp is not None and second.timestamp is not None:
-            data["interval"] = second.timestamp - first.timestamp  # bounds the motions
+        if not timed:  # the interval alone bounds the motions (and gives speeds in m/s)
+            interval = _interval(first.timestamp, second.timestamp, second.source, self.frame_rate)
+            if interval is not None:
+                data["interval"] = interval
         return data | {"pairs": "sweeps"}
 
 
@@ -659,6 +700,8 @@ def dataset_jobs(
     topic=None,
     pattern=None,
     drop_ground=None,
+    frame_rate=None,
+    poses=True,
 ):
     """The jobs of the dataset at ``path`` (a folder), in a stable order.
 
@@ -716,6 +759,16 @@ def dataset_jobs(
         when it holds frames of several kinds.
     drop_ground : bool, default=None
         Deprecated spelling of ``ground``: True is ``"drop"``, False ``"keep"``.
+    frame_rate : float, default=None
+        Frames per second of LiDAR sequences and folders of frames whose frames carry no
+        timestamps (a nuScenes log's keyframes: 2): ``1 / frame_rate`` is the interval
+        between a pair's sweeps, which bounds the objects' motions and gives their speeds
+        in m/s. Frames with timestamps (KITTI's ``times.txt``, a bag's header stamps, a
+        ``.pcd``'s absolute time field) keep theirs.
+    poses : bool, default=True
+        LiDAR sequences: start each pair's ego-motion ICP from the sequence's poses
+        (KITTI's ``poses.txt``), where it has them; False registers from the points
+        alone, so that the ego motions found can be compared with independent poses.
 
     Returns
     -------
@@ -744,6 +797,32 @@ def dataset_jobs(
     >>> [(type(job).__name__, job.name) for job in jobs]
     [('SweepPairJob', 'frame0__frame1'), ('SweepPairJob', 'frame1__frame2')]
     """
+    if frame_rate is not None:
+        try:
+            frame_rate = float(frame_rate)
+        except (TypeError, ValueError):
+            raise TypeError(f"frame_rate must be a number of Hz; got {frame_rate!r}.") from None
+        if not (0 < frame_rate < math.inf):
+            raise ValueError(f"frame_rate must be a positive number of Hz; got {frame_rate}.")
+    jobs = _dataset_jobs(
+        path, layout, ground, pairs, capture_times, flow, topic, pattern, drop_ground
+    )
+    if frame_rate is not None:
+        jobs = [
+            dataclasses.replace(job, frame_rate=frame_rate)
+            if isinstance(job, (SweepPairJob, SequenceSweepPairJob))
+            else job
+            for job in jobs
+        ]
+    if not poses:
+        jobs = [
+            dataclasses.replace(job, poses=False) if isinstance(job, SequenceSweepPairJob) else job
+            for job in jobs
+        ]
+    return jobs
+
+
+def _dataset_jobs(path, layout, ground, pairs, capture_times, flow, topic, pattern, drop_ground):
     _check_choice(layout, "layout", LAYOUTS)
     _check_choice(pairs, "pairs", PAIRS)
     ground = _ground_choice(ground, drop_ground)

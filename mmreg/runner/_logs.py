@@ -4,7 +4,8 @@
 Argoverse 2 log, a folder of frames; or a folder of logs: an Argoverse 2 split, KITTI's
 ``sequences/``), :func:`fit_log` fits a :class:`~mmreg.SequenceRegistration` on one log
 frame by frame (``partial_fit``: the memory of a few frames) and :func:`run_logs` runs
-every log as one task on a Dask cluster and writes its results:
+every log as one task (in this process, or on a Dask cluster when several logs make
+workers pay off) and writes its results:
 
 ``labels/<frame>.label``
     one little-endian ``uint32`` per row of the frame's file (invalid rows too, 0), the
@@ -21,8 +22,9 @@ every log as one task on a Dask cluster and writes its results:
     the sensor's pose of every frame in KITTI's format (12 numbers a line), the first
     the identity;
 ``frames.csv``
-    one row per frame: its file's name, time, rows, returns, moving points and objects,
-    tracks and the seconds it took;
+    one row per frame: its file's name, time (to the microsecond), rows, returns, moving
+    points and objects, tracks, points of the static world and of the ego vehicle's
+    body, and the seconds it took;
 ``pictures/<frame>.png`` and ``pictures/animation.gif`` (``pictures=True``)
     every frame from above and the whole log as one animated GIF;
 ``av2_scene_flow/<log>/<timestamp_ns>.feather`` (Argoverse 2 logs, at the top of ``out``)
@@ -61,11 +63,13 @@ from mmreg.runner._jobs import (
     _sequence_folders,
     _valid_rows,
 )
+from mmreg.runner._workers import run_tasks, task_threads
 
 __all__ = [
     "LOG_FILES",
     "LogJob",
     "NotALogError",
+    "draw_log",
     "fit_log",
     "frame_names",
     "log_jobs",
@@ -429,6 +433,7 @@ def fit_log(job, estimator, *, pictures=False, report=None):
     from sklearn.base import clone
 
     from mmreg.io import semantickitti_mos_labels
+    from mmreg.io._semantickitti import MOS_STATIC
 
     start = time.perf_counter()
     sequence = job.open()
@@ -475,6 +480,8 @@ def fit_log(job, estimator, *, pictures=False, report=None):
                     "moving_objects": int(np.count_nonzero(moving_ids > 0)),
                     "tracks": int(len(np.unique(instance[instance > 0]))),
                     "unlabelled_points": int(np.count_nonzero(semantic == 0)),
+                    "static_points": int(np.count_nonzero(semantic == MOS_STATIC)),
+                    "ego_body_points": 0 if body is None else int(np.count_nonzero(body)),
                     "load_s": float(load_s[k]),
                     "fit_s": float(fit_s[k]),
                 }
@@ -592,16 +599,17 @@ def _summary_row(job, frames, tracks, per_second, poses_given):
     }
 
 
-def _process_log(job, estimator, pictures):
-    """Fit one log (runs on a worker): ``(name, result or None, row)``; an error is the
-    log's row, the others go on."""
+def _process_log(job, estimator, pictures, report=None):
+    """Fit one log (on a worker, or here with ``report``: called with each frame done):
+    ``(name, result or None, row)``; an error is the log's row, the others go on."""
     row = {"log": job.name, "status": "error"}
     try:
         if isinstance(job, BrokenLogJob):
             raise ValueError(job.error)
+        report = _reporter(job.name) if report is None else report
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            result = fit_log(job, estimator, pictures=pictures, report=_reporter(job.name))
+            result = fit_log(job, estimator, pictures=pictures, report=report)
         row = result["row"]
         row["warnings"] = " | ".join(sorted({str(w.message) for w in caught}))[:500]
     except Exception as error:  # one log's failure is its row, not the run's end
@@ -641,9 +649,66 @@ def _finished(job, folder, out, fingerprint, stamps, pictures):
     changed = _changed_input(stamps, record.get("inputs"))
     if changed:
         return None, changed
-    if not all(p.is_file() for p in _expected_files(folder, record, out, pictures)):
+    if not all(p.is_file() for p in _expected_files(folder, record, out, False)):
         return None, ""
     return record["row"], ""
+
+
+def _pictures_missing(folder, record):
+    """Whether a finished log lacks a picture of a frame or its animation."""
+    pictures = Path(folder) / PICTURES_FOLDER
+    names = [f"{name}.png" for name in record["frames"]] + [ANIMATION]
+    return not all((pictures / name).is_file() for name in names)
+
+
+def draw_log(job, folder):
+    """The pictures of a finished log drawn from its files (``labels/``, ``poses.txt``,
+    ``tracks.csv``, ``frames.csv``) and its frames, without fitting it again: written
+    into ``folder/pictures/``, as :func:`fit_log` draws them (the ego vehicle's body is
+    drawn with the unlabelled points: the files do not tell it apart)."""
+    import pandas as pd
+
+    from mmreg import io as mmio
+
+    folder = Path(folder)
+    record = read_log_record(folder)
+    names = [str(n) for n in record["frames"]]
+    sequence = job.open()
+    if len(sequence) != len(names):
+        raise ValueError(
+            f"{job.path}: holds {len(sequence)} frames but its result {len(names)}; the log "
+            "changed since it was run."
+        )
+    poses = mmio.read_kitti_poses(folder / POSES_FILE)
+    tracks = pd.read_csv(folder / TRACKS_FILE).rename(
+        columns={"x_m": "x", "y_m": "y", "z_m": "z", "time_s": "time"}
+    )
+    frames = pd.read_csv(folder / FRAMES_FILE, dtype={"name": str})
+    drawn = []
+    n = len(names)
+    for k, name in enumerate(names):
+        raw = np.fromfile(folder / LABELS_FOLDER / f"{name}.label", dtype="<u4")
+        points = np.asarray(sequence[k].points, float)
+        if len(raw) != len(points):
+            raise ValueError(
+                f"{folder / LABELS_FOLDER / (name + '.label')}: {len(raw)} labels for the "
+                f"{len(points)} rows of frame {k}; the log changed since it was run."
+            )
+        row = frames.iloc[k]
+        title = (
+            f"{job.name} {name} ({k + 1}/{n}): "
+            f"{int(row['moving_objects'])} moving, {int(row['tracks'])} tracks"
+        )
+        shown = tracks[tracks["frame"] <= k] if len(tracks) else None
+        drawn.append(_picture(points, raw, None, poses[k], shown, k, title))
+    animation = _animation(drawn, frames["time_s"].to_numpy(float), None)
+    target = folder / PICTURES_FOLDER
+    target.mkdir(exist_ok=True)
+    for name, png in zip(names, drawn, strict=True):
+        with mmio.atomic_write(target / f"{name}.png") as handle:
+            handle.write(png)
+    with mmio.atomic_write(target / ANIMATION) as handle:
+        handle.write(animation)
 
 
 def _write_log(folder, out, job, result, row, fingerprint, stamps):
@@ -667,11 +732,11 @@ def _write_log(folder, out, job, result, row, fingerprint, stamps):
         )
     tracks = tracks_csv(result["tracks"], result["per_second"])
     with mmio.atomic_write(folder / TRACKS_FILE, "w") as handle:
-        tracks.to_csv(handle, index=False, float_format="%.6g")
+        _exact_times(tracks).to_csv(handle, index=False, float_format="%.6g")
     mmio.write_kitti_poses(folder / POSES_FILE, result["poses"])
     frames = pd.DataFrame(result["frames"])
     with mmio.atomic_write(folder / FRAMES_FILE, "w") as handle:
-        frames.to_csv(handle, index=False, float_format="%.6g")
+        _exact_times(frames).to_csv(handle, index=False, float_format="%.6g")
     if result["pictures"] is not None:
         (folder / PICTURES_FOLDER).mkdir()
         for name, png in zip(result["names"], result["pictures"], strict=True):
@@ -697,6 +762,16 @@ def _write_log(folder, out, job, result, row, fingerprint, stamps):
     }
     with mmio.atomic_write(folder / LOG_RECORD, "w") as handle:
         handle.write(json.dumps(record, indent=1, default=_json_value) + "\n")
+
+
+def _exact_times(table):
+    """``table`` with its ``time_s`` to the microsecond: a bag's stamps are seconds since
+    1970, which six significant digits round to a quarter of an hour."""
+    if "time_s" not in table or not len(table):
+        return table
+    times = table["time_s"].to_numpy(float)
+    text = np.where(np.isfinite(times), np.char.mod("%.6f", times), "")
+    return table.assign(time_s=text)
 
 
 def _json_value(value):
@@ -741,7 +816,7 @@ def run_logs(
     progress=True,
     pictures=False,
 ):
-    """Fit ``estimator`` on every log, one Dask task per log; resumable log by log.
+    """Fit ``estimator`` on every log, one task per log; resumable log by log.
 
     Parameters
     ----------
@@ -755,14 +830,15 @@ def run_logs(
     scheduler : str, default=None
         Address of a running Dask scheduler; None starts a LocalCluster.
     n_workers : int, default=None
-        Worker processes of the LocalCluster (None: one per core).
+        Worker processes of a LocalCluster; 0, or None with a single log: in this
+        process, no cluster; None with several: chosen as :func:`run_dataset` chooses.
     overwrite : bool, default=False
         Run every log again.
     progress : bool, default=True
         A progress bar over the frames on stderr.
     pictures : bool, default=False
         Draw every frame and the log's animation (``pictures/``); a finished log without
-        them is run again.
+        them gets them drawn from its files (:func:`draw_log`), not fitted again.
 
     Returns
     -------
@@ -771,7 +847,9 @@ def run_logs(
         ``moving_objects_per_frame``, ``max_moving_objects``, ``s_per_frame`` (the fit's
         seconds per frame), ``points_per_frame``, ``load_s``, ``fit_s``,
         ``velocity_unit``, ``poses_given``, ``resumed``, ``error``, ``warnings``,
-        ``changed_input`` (a log run again because that file changed).
+        ``changed_input`` (a log run again because that file changed),
+        ``picture_error``; ``summary.attrs["plan"]``: where the logs ran, as
+        :func:`run_dataset`'s.
 
     Examples
     --------
@@ -809,7 +887,7 @@ def run_logs(
     folders = {job.name: out / getattr(job, "folder", "") for job in jobs}
     fingerprints = {job.name: _log_fingerprint(job, estimator, _describe) for job in jobs}
     stamps = {job.name: _input_stamps(job) for job in jobs}
-    rows, todo, changed = {}, [], {}
+    rows, todo, changed, redraw = {}, [], {}, []
     for job in jobs:
         found = None
         if not overwrite and not isinstance(job, BrokenLogJob):
@@ -820,6 +898,9 @@ def run_logs(
             todo.append(job)
         else:
             rows[job.name] = found | {"resumed": True}
+            record = read_log_record(folders[job.name])
+            if pictures and _pictures_missing(folders[job.name], record):
+                redraw.append(job)  # --pictures added to a finished run: drawn from files
     total = sum(getattr(job, "n_frames", 0) for job in jobs)
     done = sum(getattr(job, "n_frames", 0) for job in jobs if job.name in rows)
     bar = tqdm(
@@ -830,16 +911,48 @@ def run_logs(
         unit="frame",
         desc="mmreg run",
     )
+
+    def handle(name, result, row):
+        if result is not None:
+            job = by_name[name]
+            _write_log(folders[name], out, job, result, row, fingerprints[name], stamps[name])
+        else:  # an earlier result of this log is of other inputs: no longer its result
+            with contextlib.suppress(OSError):
+                (folders[name] / LOG_RECORD).unlink()
+        rows[name] = row | {"resumed": False}
+        _interrupt.check()
+
+    def here(chosen):
+        for job in chosen:
+            handle(*_process_log(job, estimator, pictures, report=lambda k: bar.update(1)))
+
+    def cluster(chosen, address, workers):
+        begin = time.perf_counter()
+        with _client(address, workers) as client:
+            start_s = time.perf_counter() - begin
+            _run_on(client, chosen, estimator, pictures, bar, handle)
+        return start_s
+
+    by_name = {job.name: job for job in jobs}
+    plan = {"where": "this process", "workers": 0, "start_s": 0.0, "why": "nothing to run"}
     with bar:
         broken = [job for job in todo if isinstance(job, BrokenLogJob)]
         for job in broken:
             rows[job.name] = _process_log(job, estimator, pictures)[2] | {"resumed": False}
         todo = [job for job in todo if not isinstance(job, BrokenLogJob)]
-        if todo:
-            with _client(scheduler, n_workers) as client:
-                _run_on(
-                    client, todo, estimator, pictures, bar, out, folders, fingerprints, stamps, rows
-                )
+        plan = run_tasks(
+            todo,
+            here,
+            cluster,
+            scheduler=scheduler,
+            n_workers=n_workers,
+            threads=task_threads(estimator),
+        )
+        for job in redraw:
+            try:
+                draw_log(job, folders[job.name])
+            except Exception as error:  # a picture's failure is a note, not the log's
+                rows[job.name]["picture_error"] = f"{type(error).__name__}: {error}"[:500]
         for name, change in changed.items():
             if change and name in rows and not rows[name].get("resumed"):
                 rows[name]["changed_input"] = change
@@ -849,16 +962,20 @@ def run_logs(
     for column in ("error", "changed_input", "warnings"):
         if column in frame:
             frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
+    for column in ("picture_error",):
+        if column in frame:
+            frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
     if any(getattr(job, "folder", "") for job in jobs):
         from mmreg import io as mmio
 
         with mmio.atomic_write(out / SUMMARY_FILE, "w") as handle:
             frame.to_csv(handle, index=False, float_format="%.6g")
+    frame.attrs["plan"] = plan | {"redrawn": len(redraw)}
     return frame
 
 
-def _run_on(client, todo, estimator, pictures, bar, out, folders, fingerprints, stamps, rows):
-    """Submit every log, write each as it comes back."""
+def _run_on(client, todo, estimator, pictures, bar, handle):
+    """Submit every log, hand each to ``handle(name, result, row)`` as it comes back."""
     from distributed import as_completed
 
     def advance(event):
@@ -866,7 +983,6 @@ def _run_on(client, todo, estimator, pictures, bar, out, folders, fingerprints, 
 
     with contextlib.suppress(Exception):  # no progress events: the bar moves by logs
         client.subscribe_topic(PROGRESS_TOPIC, advance)
-    by_name = {job.name: job for job in todo}
     futures = [client.submit(_process_log, job, estimator, pictures, pure=False) for job in todo]
     names = {future.key: job.name for future, job in zip(futures, todo, strict=True)}
     for future in as_completed(futures):
@@ -876,15 +992,8 @@ def _run_on(client, todo, estimator, pictures, bar, out, folders, fingerprints, 
             name = names[future.key]
             result = None
             row = {"log": name, "status": "error", "error": f"{type(error).__name__}: {error}"}
-        if result is not None:
-            job = by_name[name]
-            _write_log(folders[name], out, job, result, row, fingerprints[name], stamps[name])
-        else:  # an earlier result of this log is of other inputs: no longer its result
-            with contextlib.suppress(OSError):
-                (folders[name] / LOG_RECORD).unlink()
-        rows[name] = row | {"resumed": False}
+        handle(name, result, row)
         future.release()
-        _interrupt.check()
     with contextlib.suppress(Exception):
         client.unsubscribe_topic(PROGRESS_TOPIC)
 
