@@ -494,7 +494,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             ``sweep``, kept by a caller that registers each sweep in more than one pair
             (a log: a sweep is the second of one pair and the first of the next). What
             the fit computes of one sweep alone (its ground, k-d trees, normals,
-            islands, the ego motion's voxels) is then computed once and the states keep
+            islands) is then computed once and the states keep
             it; the result is the same as without them. None: made for this fit.
 
         Returns
@@ -794,7 +794,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         """One sweep's state, for :meth:`fit` ``(states=...)`` in every pair it is in.
 
         The state keeps what a raw fit computes of the sweep alone (its ground, k-d
-        trees, surface normals, islands, the ego motion's voxels), keyed by the lengths
+        trees, surface normals, islands), keyed by the lengths
         it depends on: any ``SweepRegistration`` with the same ``tau`` and lengths can
         use it, and a sweep registered in two pairs computes each once.
 

@@ -1,11 +1,12 @@
 """One sweep and what registering it computes, each once, kept for every pair it is in.
 
 In a LiDAR log every sweep is the second of one pair and the first of the next. What the
-registration computes of a sweep alone -- its ground, k-d tree, surface normals, islands,
-the ego motion's voxel clouds -- depends on its points and on lengths the registration
-derives from ``tau``, never on the other sweep: a :class:`SweepState` computes each on
-first use and keeps it, keyed by the lengths it depends on, so that one state serves
-every pair with the same settings, and the pairs give what independent fits give.
+registration computes of a sweep alone -- its ground, k-d tree, surface normals, islands
+-- depends on its points and on lengths the registration derives from ``tau``, never on
+the other sweep: a :class:`SweepState` computes each on first use and keeps it, keyed by
+the lengths it depends on, so that one state serves every pair with the same settings,
+and the pairs give what independent fits give. The ego motion's voxel clouds are kept
+too, keyed by the centre they are laid out around (the pair's first sweep's).
 
 The subsets a pair registers (the sweep without the ego vehicle's body, the points off
 the ground) are states of their own, kept by their parent and keyed by their rows: a
