@@ -47,17 +47,17 @@ class PairResult(NamedTuple):
     (``body``'s False rows; all rows when ``body`` is None), and per cluster."""
 
     labels: np.ndarray
+    estimator: object  # the fitted estimator (last round)
     rotations: np.ndarray
     translations: np.ndarray
     scales: np.ndarray  # the ICP's robust residual scales (NaN: not refined)
     sigmas: np.ndarray  # the estimator's noise scales
     static: int
-    estimator: object  # the fitted estimator (last round)
     n_rounds: int
+    impossible: list  # the clusters taken apart, one reason each
     ego: tuple  # (R, t)
     ego_scale: float
     max_displacement: float  # the reach used
-    impossible: list  # the clusters taken apart, one reason each
     ground: tuple | None  # both sweeps' ground masks (off the body), or None
     body: tuple | None  # both sweeps' body masks (all rows), or None
 
@@ -123,55 +123,66 @@ def register_pair(
     """
     gicp = has_small_gicp()
     masks = pair_ground(first, second, settings) if ground is None else ground
-    if body is not None:  # known (a log's): no search
-        body = (*body, known) if body[0].any() or body[1].any() else None
-    elif gicp:  # the body is told apart by GICP's ego motion
-        body = find_ego_body(first, second, settings, masks, known=known)
+    body = _ego_body(first, second, settings, masks, body, known, gicp)
     if body is not None:
-        body, sweep_body, known = body
-        keep, keep_sweep = ~body, ~sweep_body
-        first, second = first.subset(keep), second.subset(keep_sweep)
-        if len(second.points) < MIN_SWEEP_POINTS:
-            raise ValueError(
-                f"sweep has {len(second.points)} points; at least {MIN_SWEEP_POINTS} are "
-                "needed (the normals of its surface need neighbourhoods)."
-            )
-        if masks is None:  # looked for again without the body
-            masks = pair_ground(first, second, settings)
-        else:
-            masks = (masks[0][keep], masks[1][keep_sweep])
-        if timing is not None:
-            timing = (timing[0][keep], timing[1][keep_sweep], timing[2])
-        body = (body, sweep_body)
+        first, second, masks, timing = _without_body(first, second, settings, masks, timing, body)
+        known = body[2]
     ego, probe, sigma = pair_ego_motion(first, second, settings, rng, known=known, gicp=gicp)
-    if settings.auto_reach:
-        # Other traffic moves about as fast as the sensor: sweeps far apart (2 Hz
-        # keyframes) need a reach that grows with the ego motion's step.
-        step = _TRAFFIC_PER_EGO * float(np.linalg.norm(ego[1]))
-        settings = settings._replace(max_displacement=max(settings.max_displacement, step))
-    if masks is None:
-        found = _objects(first, second, (ego, probe), sigma, settings, cluster, rng, timing)
-    else:
-        found = _objects_off_ground(
-            first, second, masks, (ego, probe), sigma, settings, cluster, rng, timing
-        )
-    labels, estimator, rotations, translations, scales, sigmas, static, n_rounds, impossible = found
+    settings = _reach_after(ego, settings)
+    objects = _objects(first, second, (ego, probe), sigma, settings, cluster, rng, timing, masks)
     return PairResult(
-        labels,
-        rotations,
-        translations,
-        scales,
-        sigmas,
-        static,
-        estimator,
-        n_rounds,
-        ego,
-        sigma,
-        settings.max_displacement,
-        impossible,
-        masks,
-        body,
+        *objects,
+        ego=ego,
+        ego_scale=sigma,
+        max_displacement=settings.max_displacement,
+        ground=masks,
+        body=None if body is None else body[:2],
     )
+
+
+def _ego_body(first, second, settings, masks, body, known, gicp):
+    """``(body, sweep_body, ego)``: the body given (with ``known``, the ego motion's
+    start), or found (told apart by GICP's ego motion), or None."""
+    if body is not None:  # known (a log's): no search
+        return (*body, known) if body[0].any() or body[1].any() else None
+    if not gicp:
+        return None
+    return find_ego_body(first, second, settings, masks, known=known)
+
+
+def _without_body(first, second, settings, masks, timing, body):
+    """The sweeps' states, ground masks and capture times without the ego body's rows."""
+    keep, keep_sweep = ~body[0], ~body[1]
+    first, second = first.subset(keep), second.subset(keep_sweep)
+    if len(second.points) < MIN_SWEEP_POINTS:
+        raise ValueError(
+            f"sweep has {len(second.points)} points; at least {MIN_SWEEP_POINTS} are "
+            "needed (the normals of its surface need neighbourhoods)."
+        )
+    if masks is None:  # looked for again without the body
+        masks = pair_ground(first, second, settings)
+    else:
+        masks = (masks[0][keep], masks[1][keep_sweep])
+    if timing is not None:
+        timing = (timing[0][keep], timing[1][keep_sweep], timing[2])
+    return first, second, masks, timing
+
+
+def _reach_after(ego, settings):
+    """``settings`` with an ``"auto"`` reach grown to 1.5 ego steps: other traffic moves
+    about as fast as the sensor (2 Hz keyframes need a reach that grows with the step)."""
+    if not settings.auto_reach:
+        return settings
+    step = _TRAFFIC_PER_EGO * float(np.linalg.norm(ego[1]))
+    return settings._replace(max_displacement=max(settings.max_displacement, step))
+
+
+def _objects(first, second, egos, sigma, settings, cluster, rng, timing, masks):
+    """The objects and their motions: among all points, or off the ground (``masks``,
+    the ground joining the static world)."""
+    if masks is None:
+        return _clusters(first, second, egos, sigma, settings, cluster, rng, timing)
+    return _objects_off_ground(first, second, masks, egos, sigma, settings, cluster, rng, timing)
 
 
 def _objects_off_ground(first, second, masks, egos, sigma, settings, cluster, rng, timing):
@@ -197,7 +208,7 @@ def _objects_off_ground(first, second, masks, egos, sigma, settings, cluster, rn
     # read as new.
     whole = (first, second)
     objects = first.subset(off), second.subset(sweep_off)
-    found = _objects(*objects, egos, sigma, settings, cluster, rng, timing, whole)
+    found = _clusters(*objects, egos, sigma, settings, cluster, rng, timing, whole)
     labels_off, estimator, rotations, translations, scales, sigmas, static, n_rounds, impossible = (
         found
     )
@@ -213,7 +224,7 @@ def _objects_off_ground(first, second, masks, egos, sigma, settings, cluster, rn
     return labels, estimator, rotations, translations, scales, sigmas, static, n_rounds, impossible
 
 
-def _objects(first, second, egos, sigma, settings, cluster, rng, timing, whole=None):
+def _clusters(first, second, egos, sigma, settings, cluster, rng, timing, whole=None):
     """The objects among the points of ``first`` and their motions.
 
     ``egos``: the ego motion reported (the static world's), and the one the islands are
