@@ -51,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _lidar_street import street_sweeps  # noqa: E402
 
 from mmreg import SweepRegistration  # noqa: E402
-from mmreg.sweeps._ego_motion import ego_motion  # noqa: E402
+from mmreg.sweeps._ego_motion import ego_motion, pair_ego_motion  # noqa: E402
 from mmreg.sweeps._icp import SurfaceNormals  # noqa: E402
 
 SCALE = 5.0  # tau for LiDAR in metres
@@ -156,9 +156,11 @@ def sweep_registration(a, sweep):
     """SweepRegistration's ego step: GICP, our ICP kept where it halves GICP's scale."""
     est = SweepRegistration(random_state=0)
     est._resolve_lengths()  # fit's first step: max_distance_ and the other lengths
-    tree = cKDTree(sweep)
-    context = (sweep, tree, SurfaceNormals(sweep, tree, 10), np.random.RandomState(0), None)
-    (rotation, translation), _, _ = est._ego_motion(a, context)  # (motion, ICP motion, scale)
+    first, second = est.sweep_state(a), est.sweep_state(sweep)
+    # (motion, ICP motion, scale)
+    (rotation, translation), _, _ = pair_ego_motion(
+        first, second, est._settings(), np.random.RandomState(0)
+    )
     return _matrix(rotation, translation)
 
 

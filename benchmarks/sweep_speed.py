@@ -48,26 +48,30 @@ from ego_motion import gicp, kiss  # noqa: E402
 import mmreg.estimators._two_sweeps as two_sweeps  # noqa: E402
 from mmreg import SweepRegistration  # noqa: E402
 from mmreg.estimators import _multi_model_registration  # noqa: E402
+from mmreg.sweeps import (  # noqa: E402
+    _island_search,
+    _pair,
+    _sweep_state,
+)
 
 # The command line runs the mmreg imported here (PYTHONPATH), not necessarily this tree's.
 ROOT = Path(two_sweeps.__file__).resolve().parents[2]
 NEIGHBOURS = 8
 
-# (label, owner, attribute, caller): the stages of a raw fit, timed where
-# SweepRegistration calls them (their names in mmreg.estimators._two_sweeps); a caller
-# counts only the calls from that function.
-_REGISTRATION = two_sweeps.SweepRegistration
+# (label, owner, attribute, caller): the stages of a raw fit, timed where the pipeline
+# (mmreg.sweeps._pair and the stages' modules) calls them; a caller counts only the
+# calls from that function.
 STAGES = [
-    ("ground (Patchwork++)", _REGISTRATION, "_ground_masks", None),
-    ("ego motion (ICP)", _REGISTRATION, "_ego_motion", None),
-    ("islands", two_sweeps, "voxel_islands", None),
-    ("translation starts", two_sweeps, "translation_starts", None),
-    ("island hypotheses (ICP)", two_sweeps, "multi_body_icp", "_island_hypotheses"),
-    ("choosing island motions", two_sweeps, "choose_island_motions", None),
-    ("slow movers", two_sweeps, "slow_movers", None),
+    ("ground (Patchwork++)", _pair, "pair_ground", None),
+    ("ego motion (ICP)", _pair, "pair_ego_motion", None),
+    ("islands", _sweep_state, "voxel_islands", None),
+    ("translation starts", _island_search, "translation_starts", None),
+    ("island hypotheses (ICP)", _island_search, "multi_body_icp", "_island_hypotheses"),
+    ("choosing island motions", _island_search, "choose_island_motions", None),
+    ("slow movers", _island_search, "slow_movers", None),
     ("EM", _multi_model_registration.MultiModelRegistration, "fit", None),
-    ("object ICP (refine)", _REGISTRATION, "_refine", None),
-    ("slides rejoin", two_sweeps, "_join_slides", None),
+    ("object ICP (refine)", _pair, "refine_clusters", None),
+    ("slides rejoin", _pair, "join_slides", None),
 ]
 
 

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-import mmreg.estimators._two_sweeps as two_sweeps
+import mmreg.sweeps._cluster_icp as cluster_icp
 from mmreg import MultiModelRegistration, SweepRegistration
 from mmreg.sweeps._deskew import deskew, relative_motions
 from mmreg.sweeps._icp import rotation_vectors_to_matrices
@@ -115,7 +115,7 @@ def test_no_times_never_deskews(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("deskewed without times")
 
-    monkeypatch.setattr(two_sweeps, "deskew", refuse)
+    monkeypatch.setattr(cluster_icp, "deskew", refuse)
     after = _estimator().fit(np.hstack([a, b]), sweep=sweep)
     np.testing.assert_array_equal(before.flow_, after.flow_)
     with pytest.raises(AssertionError, match="deskewed"):

@@ -127,9 +127,9 @@ def test_a_standing_sensor_keeps_its_body_in_the_static_world():
 
 def test_without_small_gicp_our_icp_finds_a_short_step(monkeypatch):
     """Intel macOS has no small_gicp wheel: the ego step falls back on our ICP alone."""
-    import mmreg.estimators._two_sweeps as two_sweeps
+    import mmreg.sweeps._pair as pair
 
-    monkeypatch.setattr(two_sweeps, "_has_small_gicp", lambda: False)
+    monkeypatch.setattr(pair, "has_small_gicp", lambda: False)
     scene = make_lidar_sweeps(n_moving=1, n_beams=16, n_azimuths=512, random_state=0)
     truth = scene.transforms[0]
     est = SweepRegistration(random_state=0).fit(scene.a, sweep=scene.sweep)

@@ -11,118 +11,37 @@ peaks of a histogram of translations to nearby points of the second sweep (as IC
 does), and the estimator groups the islands' motions into the static world and the
 moving objects. Given the points' capture times,
 the moving clusters are deskewed in the ICP (:mod:`mmreg.sweeps._deskew`).
+
+The stages of two raw sweeps are :func:`mmreg.sweeps._pair.register_pair`'s, over the
+sweeps' states (:class:`mmreg.sweeps._sweep_state.SweepState`); the estimator checks the
+input, makes the states (or takes those a caller keeps) and stores the result.
 """
 
-import copy
-import functools
-import importlib.util
 from numbers import Integral, Real
-from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, ClusterMixin, _fit_context, clone
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
 from mmreg._array.flow import rigid_flow
-from mmreg._array.geometry import climb, departures
-from mmreg._array.grouping import group_bounds, group_centroids
-from mmreg._array.motion import _group_median, moving_clusters, static_cluster
+from mmreg._array.motion import moving_clusters
 from mmreg._array.neighbors import query_workers
 from mmreg._array.point_memo import PointMemo
 from mmreg._validation import check_coordinate_range, check_ego_motion, invalid_rows
-from mmreg.sweeps._ambiguous_shapes import ACROSS, is_line, slides_in_plane
-from mmreg.sweeps._deskew import deskew, relative_motions
-from mmreg.sweeps._ego_body import confirm_body, fixed_candidates
-from mmreg.sweeps._ego_motion import _FINE_REACH as _EGO_FINE_REACH
-from mmreg.sweeps._ego_motion import _RESIDUAL_POINTS as _EGO_RESIDUAL_POINTS
-from mmreg.sweeps._ego_motion import _residual_scale, ego_motion
-from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
-from mmreg.sweeps._ground import METRE_TAU, ground_mask, has_ground, is_z_up_sweep
-from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
-from mmreg.sweeps._island_motions import (
-    choose_island_motions,
-    driven_through,
-    ego_fit,
-    facing_away,
-    translation_starts,
-)
-from mmreg.sweeps._islands import voxel_islands
-from mmreg.sweeps._motion_bounds import bound_motions
-from mmreg.sweeps._new_places import MIN_NEW_PLACE, new_place_shares
-from mmreg.sweeps._slow_movers import beyond_spacing, slow_movers
+from mmreg.sweeps._cluster_icp import refine_clusters
+from mmreg.sweeps._ground import METRE_TAU
+from mmreg.sweeps._pair import DESKEW_ROUNDS, MIN_SWEEP_POINTS, clusters_of, register_pair
+from mmreg.sweeps._settings import PairSettings
+from mmreg.sweeps._sweep_state import SweepState
 
 __all__ = ["SweepRegistration"]
 
 # Fewest points of the second sweep: the normals need neighbourhoods.
-_MIN_SWEEP_POINTS = 10
-# Raw mode: points per island in the ICP of its hypotheses, and the translation
-# histogram's bins (in units of max_distance).
-_HYPOTHESIS_POINTS = 128
-# Raw mode: Gauss-Newton steps of the hypotheses' ICP (the chosen motions are refined
-# again after the estimator, on up to max_points points).
-_HYPOTHESIS_ITER = 15
-# ICP has converged when no step moves a cluster by more than this share of max_distance.
-_TOL = 1e-4
-_BIN = 0.25
+_MIN_SWEEP_POINTS = MIN_SWEEP_POINTS
 # The lengths of "auto" in units of the estimator's tau (LiDAR in metres: tau = 5).
 _LENGTHS_PER_TAU = {"max_distance": 0.2, "island_radius": 0.1, "max_displacement": 0.6}
-# Raw mode: a cluster whose motion moves its points off their own surfaces (relative to
-# the static world) by fewer than this many of the ego ICP's robust residual scales only
-# slides along them (see _join_slides).
-_SLIDE_SCALES = 3.0
-# Raw mode: a moving island is refused when the ego motion explains at least this share
-# of a part of it and its own motion this share of the part's points fewer (a pole that
-# a walker's motion takes along: 0.85 and 0.83-0.86 fewer; a sparse walker's rings, of
-# fewer points than the parts asked for, 1.0 and 0.17-0.5 fewer).
-_TORN_EXPLAINED = 0.5
-_TORN_LOSS = 0.2
-# Raw mode: the ego ICP's motion replaces GICP's when its robust residual scale is below
-# this share of GICP's (see SweepRegistration._ego_motion). Measured ratios: 0.89-1.02
-# on real and ray-cast sweeps (GICP the more accurate), 0.47-0.52 on sparse resampled
-# boxes of which 40 % move, 0.0005-0.002 on noiseless boxes and walker scenes.
-_EGO_EXACT_SHARE = 0.75
-# Raw mode: "auto" max_displacement is at least this many times the ego motion's step.
-_TRAFFIC_PER_EGO = 1.5
-# Raw mode, "auto" max_displacement: how many times islands that nothing within the reach
-# explains search again, each time twice as far.
-_WIDENINGS = 1
-# Raw mode, z-up LiDAR sweeps: the steepest climb (rise over run, relative to the static
-# world) of an island's motion: roads climb 1 in 10 or less, very few over 1 in 5.
-_MAX_GRADE = 0.25
-# Raw mode: the searches on weaker evidence (slow movers, a motion of a spacing or two;
-# the wider reach, eight times the volume to match by chance) take islands of this many
-# times min_island_size (30 points at the default).
-_WEAK_EVIDENCE_SIZES = 2.5
-# Raw mode, the ego vehicle's body (mmreg.sweeps._ego_body), in units of tau: candidates lie
-# within _BODY_REACH of the sensor (3 m at tau 5; nuScenes' body returns lie within
-# 2.5 m) and match the other sweep within _BODY_MATCH (5 cm) at the same coordinates;
-# fewer than _MIN_BODY_POINTS confirmed points are no body.
-_BODY_REACH = 0.6
-_BODY_MATCH = 0.01
-_MIN_BODY_POINTS = 10
-# With capture times: rounds of deskewing (with the last round's motions) and ICP.
-_DESKEW_ROUNDS = 2
-
-
-def _has_small_gicp():
-    """Whether small_gicp (the ego motion's GICP) is installed."""
-    return importlib.util.find_spec("small_gicp") is not None
-
-
-def _group_sums_3(values, groups, n_groups):
-    """Sums of the rows of ``values`` (n, 3) within each group."""
-    return np.stack(
-        [np.bincount(groups, weights=values[:, i], minlength=n_groups) for i in range(3)], axis=1
-    )
-
-
-def _in_boxes(points, low, high):
-    """Whether each point lies in any of the axis-aligned boxes ``[low_k, high_k]``."""
-    inside = (points[:, None, :] >= low) & (points[:, None, :] <= high)
-    return inside.all(axis=2).any(axis=1)
 
 
 def _check_times(times, n, name):
@@ -169,135 +88,6 @@ def _check_timing(times, sweep_times, interval, n, m):
         )
     interval = _check_interval(interval)
     return _check_times(times, n, "times"), _check_times(sweep_times, m, "sweep_times"), interval
-
-
-def _join_slides(a, labels, motions, static, sigma, target, reach, whole=None):
-    """The static world takes back every cluster that only slides along its own surfaces.
-
-    A planar patch (a wall, a kerb, a strip of road) constrains only motion along its
-    normals: an ICP slides it along itself at no cost, and the slide reads as motion.
-    What shows that a cluster moved is how far its motion carries its points off their
-    own surfaces relative to the static world's motion: the RMS, over its points, of the
-    displacement ``M_k a - E a`` along each point's normal (PCA of its 10 nearest
-    points of the first sweep). Below 3 robust residual scales of the ego-motion ICP
-    (``sigma``, the same point-to-plane residual) the data cannot tell the cluster from
-    the static world: it joins it, with the static world's motion. So does a cluster
-    whose motion moves its points (median) by less than half the second sweep's sampling
-    spacing where they land (``target``: the second sweep, its cKDTree and its
-    SurfaceNormals): no sweep can show such a motion, whatever the noise. And so does
-    a cluster that its motion shows at a new place with fewer than a tenth of its
-    points (:mod:`mmreg.sweeps._new_places`) while moving along its own surfaces
-    (normal component under half the displacement): a wall slid up or down along itself
-    lands on surfaces the first sweep held already. And so does a line of points (a
-    pole, a ring of road), whatever it shows.
-
-    ``motions`` is ``(rotations, translations, ...)``, per-cluster arrays; ``reach``:
-    the ICP's gate with capture times, else None; ``whole``:
-    both sweeps with their ground, for the new places (see
-    :func:`mmreg.sweeps._new_places.new_place_shares`); returns the labels, the same
-    arrays without the joined clusters, and the static world's new index.
-    """
-    rotations, translations = motions[:2]
-    others = np.flatnonzero((labels >= 0) & (labels != static))
-    if not len(others):
-        return labels, motions, static
-    tree = cKDTree(a)
-    normals, _, _ = SurfaceNormals(a, tree, 10)(others)
-    group = labels[others]
-    points = a[others]
-    moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
-    displacement = moved - (points @ rotations[static].T + translations[static])
-    along = np.einsum("ni,ni->n", np.nan_to_num(normals), displacement)
-    n_clusters = len(rotations)
-    counts = np.maximum(np.bincount(group, minlength=n_clusters), 1)
-    evidence = np.sqrt(np.bincount(group, weights=along**2, minlength=n_clusters) / counts)
-    sweep, tree, sweep_normals = target
-    _, _, spacing = spacing_ratio(moved, tree, sweep, sweep_normals)
-    departure = _group_median(np.linalg.norm(displacement, axis=1), group, n_clusters)
-    unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
-    # A cluster whose motion shows none of it at a new place slid onto static surfaces.
-    shares = new_place_shares(
-        a, labels, motions[:2], static, sigma, target, reach=reach, whole=whole
-    )
-    # Only where its surfaces' normals lie across the motion (a wall, a building's
-    # corner slid along itself): a car seen from behind that drives on by less than its
-    # length lands within its old footprint too (its rear face among its old roof and
-    # sides), but moves across its rear face.
-    squared = np.einsum("ni,ni->n", displacement, displacement)
-    length = np.sqrt(np.bincount(group, weights=squared, minlength=n_clusters) / counts)
-    nowhere = (shares < MIN_NEW_PLACE) & (evidence < ACROSS * length)
-    # A line of points (a pole, a ring of road) slides along itself and onto any other.
-    line = is_line(points, group, n_clusters)
-    slides = np.bincount(group, minlength=n_clusters) > 0
-    # Sliding along itself shows nothing where the slide lands on places the first sweep
-    # held already; a walker crossing the view slides its face along itself too, but
-    # arrives where the first sweep saw through.
-    slid = (evidence < _SLIDE_SCALES * sigma) & (shares < MIN_NEW_PLACE)
-    slides &= slid | unseen | nowhere | line
-    if not slides.any():
-        return labels, motions, static
-    kept = ~slides
-    index = np.cumsum(kept) - 1
-    labels = np.where(labels >= 0, labels, -1)
-    labels = np.where(slides[np.maximum(labels, 0)] & (labels >= 0), static, labels)
-    labels = np.where(labels >= 0, index[np.maximum(labels, 0)], -1)
-    return labels, tuple(values[kept] for values in motions), int(index[static])
-
-
-class _IslandSearch(NamedTuple):
-    """What every search for the islands' motions shares (see ``_island_hypotheses``)."""
-
-    a: np.ndarray  # the first sweep
-    sweep: np.ndarray  # the second sweep
-    islands2: np.ndarray  # the second sweep's islands
-    n_islands2: int
-    context: tuple  # (sweep, its tree, its SurfaceNormals, random state, capture times)
-    ego: tuple  # (R, t) at which the islands are tested
-    sigma: float  # the ego ICP's robust residual scale
-    at_rest: np.ndarray  # the first sweep where the ego motion puts it
-    resting: cKDTree  # of at_rest[inside]
-    inside: np.ndarray  # the first sweep's points that lie on an island
-    rest_normals: SurfaceNormals | None  # of at_rest[inside]; None unless z-up sweeps
-
-
-def _torn_islands(a, islands, n_islands, moving, motions, at_rest, target, cell, min_size):
-    """Moving islands that hold a part their motion explains clearly worse than the ego
-    motion does.
-
-    A part is an island of voxels of side ``cell`` of at least ``min_size`` points
-    within a moving island; ``at_rest``: ``a`` moved by the ego motion. A point is
-    explained within 2 of the second sweep's sampling spacings of a point of it (the
-    slow movers' rule). Torn: the ego motion
-    explains at least half of a part's points, and the island's motion a fifth of the
-    part's points fewer. A point-to-plane cost, which chose the motion, cannot see it:
-    a thin pole moved half a metre keeps points near some plane.
-    """
-    rows = np.flatnonzero((islands >= 0) & moving[np.maximum(islands, 0)])
-    torn = np.zeros(n_islands, dtype=bool)
-    parts, n_parts = voxel_islands(a[rows], cell, 1)
-    if n_parts < 2:
-        return torn
-    owner = islands[rows]
-    sweep, tree, normals = target
-    rotations, translations = motions
-    own = np.einsum("nij,nj->ni", rotations[owner], a[rows]) + translations[owner]
-    sizes = np.bincount(parts, minlength=n_parts)
-    shares = [
-        np.bincount(
-            parts,
-            weights=spacing_ratio(moved, tree, sweep, normals)[0] <= EXPLAINED_SPACINGS,
-            minlength=n_parts,
-        )
-        / np.maximum(sizes, 1)
-        for moved in (at_rest[rows], own)
-    ]
-    worse = (
-        (sizes >= min_size) & (shares[0] >= _TORN_EXPLAINED) & (shares[1] < shares[0] - _TORN_LOSS)
-    )
-    part_owner = np.zeros(n_parts, dtype=np.intp)
-    part_owner[parts] = owner
-    torn[part_owner[worse]] = True
-    return torn
 
 
 def _check_features(X):
@@ -656,6 +446,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         sweep_ground=None,
         ego_motion=None,
         ego_body=None,
+        states=None,
     ):
         """Find the objects and their motions, refined on the second sweep.
 
@@ -698,6 +489,13 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             the last pair: it is fixed in the sensor's frame), ``(n_samples,)`` and
             ``(m,)``. Its points are left out as found ones are, and the search for them
             is skipped. None: found from the sweeps.
+        states : tuple of two SweepState, or None
+            Raw mode: the two sweeps' states, from :meth:`sweep_state` of ``X`` and of
+            ``sweep``, kept by a caller that registers each sweep in more than one pair
+            (a log: a sweep is the second of one pair and the first of the next). What
+            the fit computes of one sweep alone (its ground, k-d trees, normals,
+            islands) is then computed once and the states keep
+            it; the result is the same as without them. None: made for this fit.
 
         Returns
         -------
@@ -733,6 +531,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                         f"other {self.n_sweep_invalid_} are NaN or at the origin); at least "
                         f"{_MIN_SWEEP_POINTS} are needed."
                     )
+        if states is not None and (sweep is None or X.shape[1] != 3 or len(states) != 2):
+            raise ValueError(
+                "states go with two raw sweeps: fit(points1, sweep=points2, "
+                "states=(est.sweep_state(points1), est.sweep_state(points2)))."
+            )
         if ego_body is not None:
             if sweep is None or X.shape[1] != 3 or len(ego_body) != 2:
                 raise ValueError(
@@ -754,6 +557,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 sweep_ground,
                 ego_motion,
                 body=ego_body,
+                states=states,
             )
         # Invalid returns (NaN padding, a driver's failed returns at the origin) are no
         # measurement: the fit leaves them out and they come back as outliers.
@@ -784,6 +588,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             rows(sweep_ground, keep_sweep, "sweep_ground"),
             ego_motion,
             body=None if ego_body is None else (ego_body[0][keep], ego_body[1][keep_sweep]),
+            states=states,
         )
         # Invalid returns: no flow (NaN), in no cluster.
         self._restore_rows(keep, keep_sweep, np.nan)
@@ -821,8 +626,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         ground,
         sweep_ground,
         known=None,
-        find_body=True,
         body=None,
+        states=None,
     ):
         """``fit`` on valid rows: ``X`` validated, invalid returns of both sweeps left out."""
         self.n_ego_body_ = 0
@@ -853,7 +658,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             # Without a second sweep there is nothing to refine on: the estimator's result.
             estimator = self._make_estimator(rng).fit(X)
             d = X.shape[1] // 2
-            labels, rotations, translations, static, moving = self._clusters(estimator, X)
+            labels, rotations, translations, static, moving = clusters_of(estimator, X)
             self.estimator_, self.n_rounds_ = estimator, 1
             self._store(X[:, :d], labels, rotations, translations, static)
             self.icp_scales_ = np.full(len(rotations), np.nan)
@@ -872,115 +677,181 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             )
         self.ground_mask_ = self.sweep_ground_mask_ = None
         a = X[:, :3]
-        tree = cKDTree(sweep)
-        normals = SurfaceNormals(sweep, tree, 10, self._workers())
-        context = (sweep, tree, normals, rng, timing)
-        if X.shape[1] == 6:
-            estimator = self._make_estimator(rng).fit(X)
-            labels, rotations, translations, static, moving = self._clusters(estimator, X)
-            refine = moving.copy() if self.refine == "moving" else np.ones(len(moving), bool)
-            rotations, translations, scales = self._refine(
-                a, labels, rotations, translations, refine, context, static, _DESKEW_ROUNDS
-            )
-            self.n_rounds_ = 1
-        else:
-            masks = self._ground_masks(a, sweep, ground, sweep_ground)
-            if body is not None:  # known (a log's): no search
-                body = (*body, known) if body[0].any() or body[1].any() else None
-            elif find_body:
-                body = self._ego_body(a, sweep, masks, known)
-            if body is not None:
-                return self._fit_without_body(X, sweep, (times, sweep_times, interval), masks, body)
-            labels, estimator, rotations, translations, scales, sigmas, static = (
-                self._raw_with_ground(a, context, masks, known)
-            )
+        settings = self._settings()
+        if X.shape[1] == 3:
+            return self._fit_raw(a, sweep, timing, (ground, sweep_ground), known, body, states)
+        estimator = self._make_estimator(rng).fit(X)
+        labels, rotations, translations, static, moving = clusters_of(estimator, X)
+        refine = moving.copy() if self.refine == "moving" else np.ones(len(moving), bool)
+        target = SweepState(sweep, workers=settings.workers).target()
+        rotations, translations, scales = refine_clusters(
+            a,
+            labels,
+            (rotations, translations),
+            refine,
+            target,
+            static,
+            settings,
+            rng,
+            timing,
+            DESKEW_ROUNDS,
+        )
+        self.n_rounds_ = 1
         self.estimator_ = estimator
         self.icp_scales_ = scales
         self._copy_estimator_state(estimator)
         self._store(a, labels, rotations, translations, static)
-        if X.shape[1] == 3:  # clusters joined or added for the ground are not the estimator's
-            self.outlier_mask_ = labels < 0
-            self.sigmas_ = sigmas
-            if self.ground == "drop" and self.ground_mask_ is not None and static >= 0:
-                dropped = a[self.ground_mask_]
-                moved = dropped @ rotations[static].T + translations[static]
-                self.flow_[self.ground_mask_] = moved - dropped
         self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
         return self
 
-    def _ego_body(self, a, sweep, masks, known):
-        """Returns of the ego vehicle's body (:mod:`mmreg.sweeps._ego_body`), or None if none.
-
-        Candidates: points within ``_BODY_REACH tau`` of the sensor, off the ground,
-        that the other sweep holds within ``_BODY_MATCH tau`` at the same sensor
-        coordinates. The ego motion is found without them (from ``known`` if given) and
-        confirms those it carries off the second sweep. Returns ``(body, sweep_body,
-        ego)``, the ego motion to start the registration of the rest from.
-        """
-        if not _has_small_gicp():  # the body is told apart by GICP's ego motion
-            return None
-        tau = self._length_scale()
-        match = _BODY_MATCH * tau
-        exclude = (None, None) if masks is None else masks
-        candidates, sweep_candidates = fixed_candidates(
-            a,
-            sweep,
-            reach=_BODY_REACH * tau,
-            match=match,
-            exclude=exclude[0],
-            sweep_exclude=exclude[1],
+    def _fit_raw(self, a, sweep, timing, ground, known, body, states):
+        """Two raw sweeps (valid rows): :func:`mmreg.sweeps._pair.register_pair` over
+        their states, and its result stored."""
+        rng = check_random_state(self.random_state)
+        settings = self._settings()
+        ground = self._given_ground(a, sweep, *ground)
+        if states is None:
+            states = (
+                SweepState(a, workers=settings.workers),
+                SweepState(sweep, workers=settings.workers),
+            )
+        else:
+            _check_states(states, a, sweep)
+        result = register_pair(
+            *states,
+            settings,
+            self._cluster(rng),
+            rng,
+            known=known,
+            body=body,
+            ground=ground,
+            timing=timing,
         )
-        if candidates.sum() < _MIN_BODY_POINTS or sweep_candidates.sum() < _MIN_BODY_POINTS:
-            return None
-        rest, sweep_rest = a[~candidates], sweep[~sweep_candidates]
-        if len(rest) < _MIN_SWEEP_POINTS or len(sweep_rest) < _MIN_SWEEP_POINTS:
-            return None
-        reach = _EGO_FINE_REACH * tau if known is not None else max(tau, self.max_displacement_)
-        rotation, translation, _ = ego_motion(
-            rest, sweep_rest, scale=tau, max_displacement=reach, init=known
-        )
-        ego = (rotation, translation)
-        body, sweep_body = confirm_body(
-            a,
-            sweep,
-            candidates,
-            sweep_candidates,
-            ego,
-            match=match,
-            cell=self.island_radius_,
-            near=(np.linalg.norm(a, axis=1) < _BODY_REACH * tau)
-            & (True if masks is None else ~masks[0]),
-        )
-        if body.sum() < _MIN_BODY_POINTS:
-            return None
-        return body, sweep_body, ego
-
-    def _fit_without_body(self, X, sweep, timing, masks, body):
-        """``_fit`` on the points off the ego vehicle's body; those are labelled -1.
-
-        They move with the sensor: their flow is zero (they stay at the same sensor
-        coordinates) and they join no cluster.
-        """
-        body, sweep_body, ego = body
-        keep, keep_sweep = ~body, ~sweep_body
-        times, sweep_times, interval = timing
-        ground, sweep_ground = (None, None) if masks is None else masks
-        self._fit(
-            X[keep],
-            sweep[keep_sweep],
-            None if times is None else np.asarray(times)[keep],
-            None if sweep_times is None else np.asarray(sweep_times)[keep_sweep],
-            interval,
-            None if ground is None else ground[keep],
-            None if sweep_ground is None else sweep_ground[keep_sweep],
-            known=ego,
-            find_body=False,
-        )
-        self._restore_rows(keep, keep_sweep, 0.0)  # the body stays with the sensor
-        self.n_ego_body_ = int(body.sum())
-        self.ego_body_mask_ = body
-        self.sweep_ego_body_mask_ = sweep_body
+        self.ego_motion_ = result.ego
+        self.ego_scale_ = result.ego_scale
+        self.max_displacement_ = result.max_displacement
+        self.impossible_motions_ = result.impossible
+        if result.body is not None:
+            keep, keep_sweep = ~result.body[0], ~result.body[1]
+            a = a[keep]
+            self.ego_body_mask_ = np.zeros(len(a), dtype=bool)
+            self.sweep_ego_body_mask_ = np.zeros(int(keep_sweep.sum()), dtype=bool)
+        if result.ground is not None:
+            self.ground_mask_, self.sweep_ground_mask_ = result.ground
+        labels, rotations, translations = result.labels, result.rotations, result.translations
+        static = result.static
+        self.estimator_ = result.estimator
+        self.n_rounds_ = result.n_rounds
+        self.icp_scales_ = result.scales
+        self._copy_estimator_state(result.estimator)
+        self._store(a, labels, rotations, translations, static)
+        # Clusters joined or added for the ground are not the estimator's.
+        self.outlier_mask_ = labels < 0
+        self.sigmas_ = result.sigmas
+        if self.ground == "drop" and self.ground_mask_ is not None and static >= 0:
+            dropped = a[self.ground_mask_]
+            moved = dropped @ rotations[static].T + translations[static]
+            self.flow_[self.ground_mask_] = moved - dropped
+        self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
+        if result.body is not None:
+            self._restore_rows(keep, keep_sweep, 0.0)  # the body stays with the sensor
+            self.n_ego_body_ = int(result.body[0].sum())
+            self.ego_body_mask_, self.sweep_ego_body_mask_ = result.body
         return self
+
+    def _given_ground(self, a, sweep, ground, sweep_ground):
+        """The ground masks given to ``fit``, checked, or None."""
+        if (ground is None) != (sweep_ground is None):
+            raise ValueError(
+                "ground and sweep_ground go together: the known ground points of both sweeps."
+            )
+        if ground is None:
+            return None
+        if self.ground == "keep":
+            raise ValueError(
+                "ground masks were given with ground='keep'; pass ground='auto' to use "
+                "them, or leave them out."
+            )
+        return _check_mask(ground, len(a), "ground"), _check_mask(
+            sweep_ground, len(sweep), "sweep_ground"
+        )
+
+    def _cluster(self, rng):
+        """The estimator of the raw rounds: ``cluster(X, init)`` fits a clone."""
+        from mmreg.estimators._multi_model_registration import MultiModelRegistration
+
+        memo = PointMemo()  # the rounds fit the same a-points: one sample, one table
+
+        def cluster(X, init):
+            estimator = self._make_estimator(rng, init=init)
+            if isinstance(estimator, MultiModelRegistration):
+                estimator._point_memo = memo
+            return estimator.fit(X)
+
+        return cluster
+
+    def sweep_state(self, points):
+        """One sweep's state, for :meth:`fit` ``(states=...)`` in every pair it is in.
+
+        The state keeps what a raw fit computes of the sweep alone (its ground, k-d
+        trees, surface normals, islands), keyed by the lengths
+        it depends on: any ``SweepRegistration`` with the same ``tau`` and lengths can
+        use it, and a sweep registered in two pairs computes each once.
+
+        Parameters
+        ----------
+        points : array-like of shape (n, 3)
+            The sweep, as it will be given to ``fit`` (as ``X`` or as ``sweep``): its
+            invalid returns (NaN, failed returns at the origin) are left out as ``fit``
+            leaves them out.
+
+        Returns
+        -------
+        SweepState
+
+        Examples
+        --------
+        Three sweeps of a street, each registered with the next; the middle one's
+        state serves both pairs:
+
+        >>> from mmreg import SweepRegistration
+        >>> from mmreg.datasets import make_lidar_sequence
+        >>> log = make_lidar_sequence(3, n_azimuths=256, random_state=0)
+        >>> est = SweepRegistration(random_state=0)
+        >>> states = [est.sweep_state(points) for points in log.frames]
+        >>> for k in range(2):
+        ...     pair = est.fit(log.frames[k], sweep=log.frames[k + 1],
+        ...                    states=(states[k], states[k + 1]))
+        >>> pair.labels_.shape == (len(log.frames[1]),)
+        True
+        """
+        points = np.asarray(points)
+        if points.dtype.kind not in "iuf" or points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(
+                f"points must be an (n, 3) array of numbers; got {points.shape} of {points.dtype}."
+            )
+        points = points.astype(np.float64)
+        if np.isinf(points).any():
+            raise ValueError("points contain infinity.")
+        valid = ~invalid_rows(np.hstack([points, points]))
+        return SweepState(points[valid], workers=self._workers())
+
+    def _settings(self):
+        """The stages' settings (:class:`mmreg.sweeps._settings.PairSettings`)."""
+        return PairSettings(
+            tau=self._length_scale(),
+            max_distance=self.max_distance_,
+            island_radius=self.island_radius_,
+            min_island_size=self.min_island_size,
+            max_displacement=self.max_displacement_,
+            auto_reach=self.max_displacement == "auto",
+            max_icp_iter=self.max_icp_iter,
+            max_points=self.max_points,
+            max_rounds=self.max_rounds,
+            ground=self.ground,
+            workers=self._workers(),
+            interval=getattr(self, "interval_", None),
+        )
 
     def _copy_estimator_state(self, estimator):
         n_clusters = len(estimator.rotations_)
@@ -998,79 +869,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.flow_ = rigid_flow(a, labels, rotations, translations)
 
     @staticmethod
-    def _clusters(estimator, X):
-        """Labels, motions, static world and moving flags of a fitted estimator."""
-        labels = np.asarray(estimator.labels_)
-        rotations = np.asarray(estimator.rotations_, dtype=float)
-        translations = np.asarray(estimator.translations_, dtype=float)
-        static = getattr(estimator, "static_cluster_", None)
-        if static is None:
-            static = static_cluster(labels)
-        moving = getattr(estimator, "moving_", None)
-        if moving is None:
-            a, b = X[:, :3], X[:, 3:]
-            moving = moving_clusters(a, b, labels, rotations, translations, static)
-        return labels, rotations, translations, int(static), np.asarray(moving, dtype=bool)
-
-    @staticmethod
     def _moving(a, b, labels, rotations, translations, static):
         if static < 0:
             return np.ones(len(rotations), dtype=bool)
         return moving_clusters(a, b, labels, rotations, translations, static)
-
-    def _refine(self, a, labels, rotations, translations, refine, context, static, rounds):
-        """ICP of the clusters flagged ``refine`` on the sweep; the others keep their motion.
-
-        With capture times, ``rounds`` of deskewing and ICP.
-        """
-        sweep, tree, normals, rng, timing = context
-        rotations, translations = rotations.copy(), translations.copy()
-        scales = np.full(len(rotations), np.nan)
-        chosen = np.flatnonzero(refine)
-        if not len(chosen) or self.max_icp_iter == 0:
-            return rotations, translations, scales
-        index = -np.ones(len(rotations) + 1, dtype=np.intp)
-        index[chosen] = np.arange(len(chosen))
-        sub = np.where(labels >= 0, index[labels], -1)
-        keep = subsample_groups(sub, self.max_points, rng)
-        mask = np.full(len(a), -1, dtype=np.intp)
-        mask[keep] = sub[keep]
-        # With capture times the static world is refined as without (it needs no
-        # deskewing: the sweeps are compensated for the ego motion), then the others.
-        parts = [chosen] if timing is None else [chosen[chosen == static], chosen[chosen != static]]
-        for part in parts:
-            if not len(part):
-                continue
-            index[:] = -1
-            index[part] = np.arange(len(part))
-            group = np.where(mask >= 0, index[chosen[np.maximum(mask, 0)]], -1)
-            if part is chosen or part[0] == static:
-                result = self._icp(
-                    a, group, rotations[part], translations[part], sweep, tree, normals
-                )
-            else:
-                result = self._deskewed_icp(
-                    a, labels, group, part, rotations, translations, static, sweep, timing, rounds
-                )
-            rotations[part] = result.rotations
-            translations[part] = result.translations
-            scales[part] = result.scales
-        return rotations, translations, scales
-
-    def _icp(self, a, group, rotations, translations, sweep, tree, normals):
-        return multi_body_icp(
-            a,
-            group,
-            rotations,
-            translations,
-            sweep,
-            tree=tree,
-            normals=normals,
-            max_distance=self.max_distance_,
-            max_iter=self.max_icp_iter,
-            tol=_TOL * self.max_distance_,
-            workers=self._workers(),
-        )
 
     def _workers(self):
         """Threads of the ICPs' k-d tree queries: the estimator's ``n_jobs`` (None: one).
@@ -1081,413 +883,6 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         if self.estimator is not None:
             n_jobs = self.estimator.get_params(deep=False).get("n_jobs")
         return query_workers(n_jobs)
-
-    def _deskewed_icp(
-        self, a, labels, group, part, rotations, translations, static, sweep, timing, rounds
-    ):
-        """Rounds of deskewing (with the last motions) and ICP of the clusters ``part``.
-
-        The a-points of every cluster of ``part``, and the points of the second sweep
-        nearer to that cluster's moved points than to any other cluster's, are moved to
-        their sweep's reference time along the cluster's motion relative to the static
-        world (:mod:`mmreg.sweeps._deskew`); the ICP aligns the deskewed sets. ``group`` numbers
-        the ICP's points by their cluster's place in ``part``.
-        """
-        times, sweep_times, interval = timing
-        if static >= 0:
-            world = rotations[static], translations[static]
-        else:
-            world = np.eye(3), np.zeros(3)
-        member = np.flatnonzero(group >= 0)
-        g = group[member]
-        n_part = len(part)
-        counts = np.maximum(np.bincount(g, minlength=n_part), 1)
-        centres = _group_sums_3(a[member], g, n_part) / counts[:, None]
-        R, t = rotations[part], translations[part]
-        # Only the second sweep's points near the clusters can be matched or deskewed:
-        # those in the clusters' moved bounding boxes grown by twice the ICP's reach
-        # (the rounds move them far less).
-        moved = np.einsum("nij,nj->ni", R[g], a[member]) + t[g]
-        margin = 2 * self.max_distance_
-        low, high = group_bounds(moved, g, n_part)
-        local = np.flatnonzero(_in_boxes(sweep, low - margin, high + margin))
-        if not len(local):  # nothing to match: the ICP leaves the motions as they are
-            return multi_body_icp(
-                a, group, R, t, sweep, max_distance=self.max_distance_, max_iter=0
-            )
-        # A point nearer to another cluster (the static world's points all take part)
-        # stays as it is.
-        rest = np.flatnonzero((labels >= 0) & ~np.isin(labels, part))
-        others = np.einsum("nij,nj->ni", rotations[labels[rest]], a[rest])
-        others += translations[labels[rest]]
-        others = others[_in_boxes(others, low - 2 * margin, high + 2 * margin)]
-        other = np.full(len(local), np.inf)
-        if len(others) and len(local):
-            other, _ = cKDTree(others).query(sweep[local])
-        fractions = sweep_times[local] / interval
-        fractions1 = times[member] / interval
-        result = None
-        for _ in range(rounds):
-            first, second = relative_motions(R, t, world)
-            points = a.copy()
-            points[member] = deskew(a[member], g, fractions1, *first, centres, turn=False)
-            moved = np.einsum("nij,nj->ni", R[g], points[member]) + t[g]
-            # Each of these sweep points belongs to the cluster of its nearest moved point.
-            distance, nearest = cKDTree(moved).query(sweep[local])
-            owner = np.where(distance < other, g[nearest], -1)
-            # The second sweep's centres: where the clusters' centroids moved.
-            centres2 = np.einsum("kij,kj->ki", R, centres) + t
-            target = deskew(sweep[local], owner, fractions, *second, centres2, turn=False)
-            target_tree = cKDTree(target)
-            normals = SurfaceNormals(target, target_tree, 10, self._workers())
-            result = self._icp(points, group, R, t, target, target_tree, normals)
-            R, t = result.rotations, result.translations
-        return result
-
-    def _ego_motion(self, a, context, known=None):
-        """The dominant motion: GICP from the identity (or ``known``), then our ICP.
-
-        GICP (:func:`mmreg.sweeps._ego_motion.ego_motion`, coarse to fine on voxels) finds
-        motions up to ``max(tau, max_displacement_)`` from the identity and is the more
-        accurate on real sweeps (static EPE 12-17 mm against 18-34 mm on the Argoverse 2
-        pairs), but where moving objects make much of a scene, or the sweeps are
-        noiseless, its voxels' covariances pull it centimetres off. Our raw-point ICP
-        (Tukey's kernel) is then run from GICP's motion and kept only when its robust
-        point-to-plane residual scale is under three quarters of GICP's: it is when GICP
-        is off by more than the sampling noise (0.002-0.5 of it on box and walker
-        scenes), never on real or ray-cast sweeps (0.89-1.02 of it;
-        ``benchmarks/results/ego_motion.md``).
-
-        Without small_gicp (Intel macOS has no wheel), our ICP alone, from the identity
-        (or ``known``) with a reach of twice then once ``max_distance_``.
-
-        Returns the motion, the ICP's motion (where the islands are tested) and its
-        robust point-to-plane residual scale.
-        """
-        sweep, tree, normals, rng, _ = context
-        labels = np.zeros(len(a), dtype=np.intp)
-        keep = subsample_groups(labels, self.max_points, rng)
-        mask = np.full(len(a), -1, dtype=np.intp)
-        mask[keep] = 0
-        if not _has_small_gicp():
-            rotation, translation = (np.eye(3), np.zeros(3)) if known is None else known
-            rotation, translation = rotation[None], translation[None]
-            for reach in (2.0, 1.0):
-                result = multi_body_icp(
-                    a,
-                    mask,
-                    rotation,
-                    translation,
-                    sweep,
-                    tree=tree,
-                    normals=normals,
-                    max_distance=reach * self.max_distance_,
-                    max_iter=self.max_icp_iter,
-                    tol=_TOL * self.max_distance_,
-                    workers=self._workers(),
-                )
-                rotation, translation = result.rotations, result.translations
-            ego = (rotation[0], translation[0])
-            return ego, ego, float(result.scales[0])
-        tau = self._length_scale()
-        reach = max(tau, self.max_displacement_)
-        if known is not None:  # a start within the fine stage's reach: no coarse stage
-            reach = _EGO_FINE_REACH * tau
-        rotation, translation, sigma = ego_motion(
-            a,
-            sweep,
-            scale=tau,
-            max_displacement=reach,
-            sweep_normals=normals,
-            init=known,
-        )
-        gicp = (rotation, translation)
-        result = multi_body_icp(
-            a,
-            mask,
-            rotation[None],
-            translation[None],
-            sweep,
-            tree=tree,
-            normals=normals,
-            max_distance=self.max_distance_,
-            max_iter=self.max_icp_iter,
-            tol=_TOL * self.max_distance_,
-            workers=self._workers(),
-        )
-        icp = (result.rotations[0], result.translations[0])
-        stride = -(-len(a) // _EGO_RESIDUAL_POINTS)
-        icp_sigma = _residual_scale(a[::stride], sweep, *icp, _EGO_FINE_REACH * tau, normals)
-        # The islands' tests (their motions, the slow movers) weigh point-to-plane
-        # residuals on the raw points: they read them at the ICP's motion, the minimum
-        # of that cost, in the ICP's own scale (annealed, floored). At GICP's motion a
-        # static wall keeps a residual of a few millimetres that reads as a slow mover.
-        chosen = icp if icp_sigma < _EGO_EXACT_SHARE * sigma else gicp
-        return chosen, icp, float(result.scales[0])
-
-    def _island_motions(self, a, context, ego, sigma):
-        """Every island's motion: the ego motion unless another one clearly explains it.
-
-        ``ego`` and ``sigma`` are the ego motion and its residual scale. Returns the
-        islands of the first sweep, their rotations and translations, and whether each
-        moves relative to the ego motion.
-        """
-        sweep, tree, normals, rng, _ = context
-        islands, n_islands = voxel_islands(a, self.island_radius_, self.min_island_size)
-        islands2, n_islands2 = voxel_islands(sweep, self.island_radius_, self.min_island_size)
-        at_rest = a @ ego[0].T + ego[1]  # the first sweep where the ego motion puts it
-        inside = np.flatnonzero(islands >= 0)
-        resting = cKDTree(at_rest[inside])
-        # The islands' surfaces where the ego motion puts them (their normals on demand).
-        rest_normals = None
-        if is_z_up_sweep(a):
-            rest_normals = SurfaceNormals(at_rest[inside], resting, 10, self._workers())
-        search = _IslandSearch(
-            a,
-            sweep,
-            islands2,
-            n_islands2,
-            context,
-            ego,
-            sigma,
-            at_rest,
-            resting,
-            inside,
-            rest_normals,
-        )
-        reach = self.max_displacement_
-        moving, rotations, translations, unexplained, explained = self._island_hypotheses(
-            islands, n_islands, search, reach, rng
-        )
-        if self.max_displacement == "auto":
-            # The reach is a guess at the traffic's speed times the sweeps' interval, which
-            # the points do not give: a slow ego car 0.5 s apart leaves a 5 m mover beyond
-            # it. Islands that neither the ego motion nor any motion within the reach
-            # explains (most of their points) search again, alone, twice as far (a copy
-            # of the random state, so that the steps after see the same draws whether or
-            # not one searches). Within the reach such a car can still find a motion
-            # that lays half of it on something else and passes as a mover.
-            wide_rng = copy.deepcopy(rng)
-            # Twice as far, a chance match is likelier: only islands of a few times
-            # the smallest size search there.
-            sizes = np.bincount(islands[islands >= 0], minlength=n_islands)
-            large = sizes >= _WEAK_EVIDENCE_SIZES * self.min_island_size
-            for _ in range(_WIDENINGS):
-                lost = unexplained & (~moving | (explained < 0.5)) & large
-                if not lost.any():
-                    break
-                reach *= 2.0
-                number = np.cumsum(lost) - 1
-                subset = np.where(islands >= 0, np.where(lost, number, -1)[islands], -1)
-                found, sub_r, sub_t, sub_unexplained, sub_explained = self._island_hypotheses(
-                    subset, int(lost.sum()), search, reach, wide_rng, last=True
-                )
-                where = np.flatnonzero(lost)
-                # Twice as far, a flat patch finds more of its plane to slide along and
-                # a pole more poles to match.
-                found &= ~slides_in_plane(a, subset, len(where), (sub_r, sub_t), ego)
-                found &= ~is_line(a, subset, len(where))
-                # A motion found twice as far replaces one found within the reach only
-                # where it explains more of the island.
-                found &= ~moving[where] | (sub_explained > explained[where])
-                moving[where[found]] = True
-                rotations[where[found]], translations[where[found]] = sub_r[found], sub_t[found]
-                explained[where[found]] = sub_explained[found]
-                unexplained[where] = sub_unexplained
-        # An island's motion must not explain a part of it clearly worse than the ego
-        # motion does: a walker beside a pole shares its island, whose ICP may follow
-        # the walker and take the pole along. Refused, the island stays at rest and the
-        # walker is found point by point (below).
-        if moving.any():
-            torn = _torn_islands(
-                a,
-                islands,
-                n_islands,
-                moving,
-                (rotations, translations),
-                at_rest,
-                (sweep, tree, normals),
-                0.5 * self.island_radius_,
-                int(np.ceil(_WEAK_EVIDENCE_SIZES * self.min_island_size)),
-            )
-            moving &= ~torn
-            rotations[torn], translations[torn] = ego
-        # Objects that move by a few sampling spacings stay within the ego motion's
-        # band and often share an island with a static structure: found point by point
-        # among the points no moving island holds, they become islands of their own.
-        slow, slow_rotations, slow_translations = slow_movers(
-            a,
-            (islands < 0) | ~moving[np.maximum(islands, 0)],
-            ego,
-            sigma,
-            (sweep, tree, normals),
-            resting,
-            cell=0.5 * self.island_radius_,
-            min_size=int(np.ceil(_WEAK_EVIDENCE_SIZES * self.min_island_size)),
-            max_points=2 * _HYPOTHESIS_POINTS,
-            max_distance=self.max_distance_,
-            max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
-            tol=_TOL * self.max_distance_,
-            random_state=rng,
-            moved=at_rest,
-            # A seed apart from everything else that fails from the ego motion starts
-            # again where an island would (a copy of the random state: the steps after
-            # draw alike whether or not a seed does).
-            starts=functools.partial(
-                translation_starts,
-                a,
-                sweep=sweep,
-                islands2=search.islands2,
-                n_islands2=search.n_islands2,
-                ego=ego,
-                max_displacement=self.max_displacement_,
-                bin_size=_BIN * self.max_distance_,
-                random_state=copy.deepcopy(rng),
-                moved=at_rest,
-            ),
-            reach=self.max_displacement_,
-            max_grade=None if rest_normals is None else _MAX_GRADE,
-            rest_normals=rest_normals,
-        )
-        if len(slow_rotations):
-            islands = np.where(slow >= 0, n_islands + slow, islands)
-            rotations = np.concatenate([rotations, slow_rotations])
-            translations = np.concatenate([translations, slow_translations])
-            moving = np.concatenate([moving, np.ones(len(slow_rotations), dtype=bool)])
-        return islands, rotations, translations, moving
-
-    def _island_hypotheses(self, islands, n_islands, search, reach, rng, last=False):
-        """Each island's motion hypotheses within ``reach``, and the one it keeps.
-
-        The ICPs start within ``reach`` and, but in the ``last`` search, end there.
-
-        ``search`` holds what every search shares (:class:`_IslandSearch`). Returns
-        whether each island moves, its rotation and translation (the ego motion's where
-        it does not), whether the ego motion leaves most of its points unexplained, and
-        the share of its points that its motion explains (where it moves).
-        """
-        a, sweep, ego, sigma = search.a, search.sweep, search.ego, search.sigma
-        at_rest, inside, rest_normals = search.at_rest, search.inside, search.rest_normals
-        _, tree, normals, _, _ = search.context
-        starts = translation_starts(
-            a,
-            islands,
-            n_islands,
-            sweep,
-            search.islands2,
-            search.n_islands2,
-            ego,
-            max_displacement=reach,
-            bin_size=_BIN * self.max_distance_,
-            random_state=rng,
-            moved=at_rest,
-        )
-        n_starts = starts.shape[1]
-        # Every (island, start) pair is one cluster of one multi-body ICP.
-        chosen = subsample_groups(islands, _HYPOTHESIS_POINTS, rng)
-        rows = np.repeat(chosen, n_starts)
-        pair = islands[rows] * n_starts + np.tile(np.arange(n_starts), len(chosen))
-        valid = np.isfinite(starts).all(axis=2).ravel()
-        # Islands the ego motion explains too well for any motion to be chosen over it
-        # need no ICP (most of the static world: half to three quarters of the islands).
-        target = (sweep, tree, normals)
-        fit = ego_fit(
-            a[chosen],
-            islands[chosen],
-            n_islands,
-            ego,
-            sigma,
-            target,
-            max_distance=self.max_distance_,
-        )
-        # Faces the second sensor cannot see, where the ego motion puts them, are no
-        # sign of motion (a building's end wall driven past, 2 Hz keyframes), unless
-        # the sensor drove through them (the rear of the car ahead): asked of the
-        # islands the ego motion does not already explain, in LiDAR sweeps as a sensor
-        # writes them (z up, each sensor at its sweep's origin).
-        open_ = np.flatnonzero(~fit.hopeless()[islands[chosen]])
-        # The noise of a climb: the ego's residual, or the islands' own sampling spacing.
-        rise_noise = np.full(n_islands, _SLIDE_SCALES * sigma)
-        if len(open_) and rest_normals is not None:
-            rest = at_rest[chosen[open_]]
-            position = np.searchsorted(inside, chosen[open_])
-            normal, _, _ = rest_normals(position)
-            spacing = _group_median(
-                rest_normals.spacing(position), islands[chosen[open_]], n_islands
-            )
-            rise_noise = np.fmax(rise_noise, spacing)
-            hidden = np.zeros(len(chosen), dtype=bool)
-            hidden[open_] = facing_away(rest, normal, ego[1], np.zeros(3))
-            through = driven_through(
-                rest, islands[chosen[open_]], n_islands, ego[1], np.zeros(3), self.island_radius_
-            )
-            hidden[open_] &= ~through[islands[chosen[open_]]]
-            fit = fit.with_hidden(islands[chosen], hidden)
-        hopeless = fit.hopeless()
-        pair = np.where(valid[pair] & ~hopeless[islands[rows]], pair, -1)
-        n_pairs = n_islands * n_starts
-        rotations = np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy()
-        translations = ego[1] + np.nan_to_num(starts).reshape(n_pairs, 3)
-        result = multi_body_icp(
-            a[rows],
-            pair,
-            rotations,
-            translations,
-            sweep,
-            tree=tree,
-            normals=normals,
-            max_distance=self.max_distance_,
-            max_iter=min(self.max_icp_iter, _HYPOTHESIS_ITER),
-            tol=_TOL * self.max_distance_,
-            measure=False,
-            workers=self._workers(),
-        )
-        motions = (result.rotations, result.translations)
-        # The reach bounds where the ICP ends, not only where it starts: one that slid a
-        # car's faces along themselves out of the reach found no motion within it (and
-        # the island searches again, farther, where the reach is a guess). The last
-        # search keeps what it finds: a sparse car's rings slide it past any bound.
-        centroids, _ = group_centroids(a[chosen], islands[chosen], n_islands)
-        centre = np.repeat(centroids, n_starts, axis=0)
-        offset = departures(centre, result.rotations, result.translations, ego)
-        if not last:
-            valid &= ~(np.linalg.norm(offset, axis=1) > reach)
-        if rest_normals is not None:
-            # Traffic moves along the ground: a climb steeper than 1 in 4 (beyond the
-            # noise, or a spacing) is the rings of a sparse sensor slid onto each other.
-            valid &= ~(climb(offset, _MAX_GRADE) > np.repeat(rise_noise, n_starts))
-        moving, pick, explained = choose_island_motions(
-            a[chosen],
-            islands[chosen],
-            n_islands,
-            ego,
-            motions,
-            valid.reshape(n_islands, n_starts) & ~hopeless[:, None],
-            sigma,
-            target,
-            (search.resting, islands[inside], 0.5 * self.island_radius_),
-            max_distance=self.max_distance_,
-            fit=fit,
-        )
-        rotations = np.broadcast_to(ego[0], (n_islands, 3, 3)).copy()
-        translations = np.broadcast_to(ego[1], (n_islands, 3)).copy()
-        rotations[moving] = result.rotations[pick[moving]]
-        translations[moving] = result.translations[pick[moving]]
-        # A far, sparse island that its motion shifts by less than two of the second
-        # sweep's sampling spacings has not moved (its better fit is another sampling).
-        if moving.any():
-            moving &= beyond_spacing(
-                a[chosen],
-                islands[chosen],
-                n_islands,
-                (rotations, translations),
-                ego,
-                tree,
-                sweep,
-                normals,
-            )
-            rotations[~moving], translations[~moving] = ego
-        return moving, rotations, translations, fit.mostly_unexplained(), explained
 
     def _resolve_lengths(self):
         """The lengths in use: as given, or ``"auto"`` from the estimator's ``tau``."""
@@ -1503,158 +898,22 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             tau = self.estimator.get_params(deep=False).get("tau")
         return float(tau) if isinstance(tau, Real) and not isinstance(tau, bool) else METRE_TAU
 
-    def _ground_masks(self, a, sweep, ground, sweep_ground):
-        """The ground of both sweeps: the masks given, found, or None (kept)."""
-        if (ground is None) != (sweep_ground is None):
-            raise ValueError(
-                "ground and sweep_ground go together: the known ground points of both sweeps."
-            )
-        if ground is not None:
-            if self.ground == "keep":
-                raise ValueError(
-                    "ground masks were given with ground='keep'; pass ground='auto' to use "
-                    "them, or leave them out."
-                )
-            return _check_mask(ground, len(a), "ground"), _check_mask(
-                sweep_ground, len(sweep), "sweep_ground"
-            )
-        if self.ground == "keep" or not is_z_up_sweep(a):
-            return None
-        tau = self._length_scale()
-        ground = ground_mask(a, tau)
-        if not has_ground(a, ground):  # removed before: its remnants are objects' bottoms
-            return None
-        return ground, ground_mask(sweep, tau)
-
-    def _raw_with_ground(self, a, context, masks, known=None):
-        """Two raw sweeps: the ego motion on everything, the objects off the ground.
-
-        The ego-motion ICP aligns the whole sweeps (the ground holds roll, pitch and
-        height); the islands, their hypotheses, the estimator and the object ICPs see the
-        points off the ground of both sweeps; the ground joins the static world.
-        """
-        ego, probe, sigma = self._ego_motion(a, context, known)
-        self.ego_motion_ = ego
-        self.ego_scale_ = sigma
-        if self.max_displacement == "auto":
-            # Other traffic moves about as fast as the sensor: sweeps far apart (2 Hz
-            # keyframes) need a reach that grows with the ego motion's step.
-            step = _TRAFFIC_PER_EGO * float(np.linalg.norm(ego[1]))
-            self.max_displacement_ = max(self.max_displacement_, step)
-        if masks is None:
-            return self._raw(a, context, (ego, probe), sigma)
-        ground, sweep_ground = masks
-        self.ground_mask_, self.sweep_ground_mask_ = ground, sweep_ground
-        sweep, whole_tree, whole_normals, rng, timing = context
-        off, sweep_off = ~ground, ~sweep_ground
-        if off.sum() < 3 or sweep_off.sum() < _MIN_SWEEP_POINTS:
-            raise ValueError(
-                f"{ground.sum()} of {len(a)} points of the first sweep and "
-                f"{sweep_ground.sum()} of {len(sweep)} of the second were taken for the "
-                "ground, leaving too few to register; pass ground='keep'."
-            )
-        sweep_off_points = sweep[sweep_off]
-        tree = cKDTree(sweep_off_points)
-        if timing is not None:
-            timing = (timing[0][off], timing[1][sweep_off], timing[2])
-        context = (
-            sweep_off_points,
-            tree,
-            SurfaceNormals(sweep_off_points, tree, 10, self._workers()),
-            rng,
-            timing,
-        )
-        # The new places are judged against both sweeps whole: the two masks of the
-        # ground differ at objects' feet, where a surface left in one sweep only would
-        # read as new.
-        whole = (a, (sweep, whole_tree, whole_normals))
-        labels_off, estimator, rotations, translations, scales, sigmas, static = self._raw(
-            a[off], context, (ego, probe), sigma, whole
-        )
-        if static < 0:  # the ground is the static world's first member
-            static = len(rotations)
-            rotations = np.concatenate([rotations, ego[0][None]])
-            translations = np.concatenate([translations, ego[1][None]])
-            scales = np.concatenate([scales, [np.nan]])
-            sigmas = np.concatenate([sigmas, [np.nan]])
-        labels = np.full(len(a), -1 if self.ground == "drop" else static, dtype=labels_off.dtype)
-        labels[off] = labels_off
-        return labels, estimator, rotations, translations, scales, sigmas, static
-
-    def _raw(self, a, context, egos, sigma, whole=None):
-        # ``egos``: the ego motion reported (the static world's), and the one the islands
-        # are tested and the clusters started at (see _ego_motion).
-        ego, probe = egos
-        sweep, tree, normals, rng, _ = context
-        islands, rotations, translations, _ = self._island_motions(a, context, probe, sigma)
-        # Label 0: the ego motion, for the small islands and every static one.
-        motions = (
-            np.concatenate([probe[0][None], rotations]),
-            np.concatenate([probe[1][None], translations]),
-        )
-        labels = islands + 1
-        previous = None
-        from mmreg.estimators._multi_model_registration import MultiModelRegistration
-
-        memo = PointMemo()  # the rounds fit the same a-points: one sample, one table
-        for round_ in range(1, self.max_rounds + 1):
-            X = np.hstack([a, rigid_flow(a, labels, *motions) + a])
-            estimator = self._make_estimator(rng, init=labels)
-            if isinstance(estimator, MultiModelRegistration):
-                estimator._point_memo = memo
-            estimator = estimator.fit(X)
-            labels, rotations, translations, static, _ = self._clusters(estimator, X)
-            # The static world keeps the ego motion: its ICP used the whole sweep, and
-            # on real sweeps one fitted to the static cluster alone was worse (static EPE
-            # 0.031 m against 0.020 m on icpflow_av2_demo).
-            refine = np.ones(len(rotations), dtype=bool)
-            if static >= 0:
-                refine[static] = False
-                rotations[static], translations[static] = ego
-            # With capture times, two rounds of deskewing and ICP: the first deskews
-            # with the estimator's motions, the second with the first's ICP motions.
-            rotations, translations, scales = self._refine(
-                a, labels, rotations, translations, refine, context, static, _DESKEW_ROUNDS
-            )
-            motions = (rotations, translations)
-            self.n_rounds_ = round_
-            if previous is not None and np.array_equal(previous, labels):
-                break
-            previous = labels
-        sigmas = np.asarray(getattr(estimator, "sigmas_", np.full(len(rotations), np.nan)))
-        if static >= 0:
-            labels, (rotations, translations, scales, sigmas), static = _join_slides(
-                a,
-                labels,
-                (rotations, translations, scales, sigmas),
-                static,
-                sigma,
-                (sweep, tree, normals),
-                # Motions fitted to deskewed points put the raw ones near their view.
-                None if context[4] is None else self.max_distance_,
-                whole,
-            )
-            # Motions no vehicle or person can make: taken apart (the static world where
-            # its motion explains them, else outliers); mmreg.sweeps._motion_bounds.
-            labels, (rotations, translations, scales, sigmas), static, self.impossible_motions_ = (
-                bound_motions(
-                    a,
-                    labels,
-                    (rotations, translations, scales, sigmas),
-                    static,
-                    (sweep, tree, normals) if whole is None else whole[1],
-                    sigma,
-                    scale=self._length_scale(),
-                    # "auto" stands for an unknown interval, searched twice as far.
-                    reach=self.max_displacement_
-                    * (2.0**_WIDENINGS if self.max_displacement == "auto" else 1.0),
-                    interval=getattr(self, "interval_", None),
-                    up=np.eye(3)[2] if is_z_up_sweep(a if whole is None else whole[0]) else None,
-                )
-            )
-        return labels, estimator, rotations, translations, scales, sigmas, static
-
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.allow_nan = False
         return tags
+
+
+def _check_states(states, a, sweep):
+    """``states`` as two SweepState of ``a`` and ``sweep``; a clear error otherwise."""
+    for i, (state, points, name) in enumerate(zip(states, (a, sweep), ("X", "sweep"), strict=True)):
+        if not isinstance(state, SweepState):
+            raise TypeError(
+                f"states[{i}] must be a SweepState from SweepRegistration.sweep_state; got "
+                f"{type(state).__name__}."
+            )
+        if state.points.shape != points.shape or not np.array_equal(state.points, points):
+            raise ValueError(
+                f"states[{i}] holds other points than {name} ({len(state.points)} valid "
+                f"points against {len(points)}): make it with sweep_state({name})."
+            )

@@ -21,15 +21,24 @@ units of its ``tau``).
 import numpy as np
 from scipy.spatial import cKDTree
 
+from mmreg.sweeps._ego_motion import _FINE_REACH, ego_motion
 from mmreg.sweeps._islands import voxel_islands
 
-__all__ = ["confirm_body", "fixed_candidates"]
+__all__ = ["confirm_body", "find_ego_body", "fixed_candidates"]
 
 # An island of candidates is the body when this share of its points is carried off by
 # the ego motion (a third of a car's returns face along the motion: its ends and edges).
 _CARRIED_SHARE = 0.25
 # ... and when this share of its points are candidates at all.
 _FIXED_SHARE = 0.5
+# In units of tau: candidates lie within _REACH of the sensor (3 m at tau 5; nuScenes'
+# body returns lie within 2.5 m) and match the other sweep within _MATCH (5 cm) at the
+# same coordinates; fewer than _MIN_POINTS confirmed points are no body.
+_REACH = 0.6
+_MATCH = 0.01
+_MIN_POINTS = 10
+# Fewest points left of each sweep for an ego motion without the candidates.
+_MIN_REST = 10
 
 
 def fixed_candidates(points, sweep, *, reach, match, exclude=None, sweep_exclude=None):
@@ -144,3 +153,52 @@ def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match, cel
         distance, _ = cKDTree(points[body]).query(sweep[second], distance_upper_bound=match)
         sweep_body[second[distance <= match]] = True
     return body, sweep_body
+
+
+def find_ego_body(first, second, settings, ground=None, *, known=None):
+    """A pair's returns of the ego vehicle's body, or None if it shows none.
+
+    Candidates (:func:`fixed_candidates`): points within ``0.6 tau`` of the sensor, off
+    the ``ground`` (the two sweeps' masks, or None), that the other sweep holds within
+    ``tau / 100`` at the same sensor coordinates. The ego motion is found without them
+    (from ``known`` if given) and confirms those it carries off the second sweep
+    (:func:`confirm_body`). ``first`` and ``second`` are the sweeps'
+    :class:`~mmreg.sweeps._sweep_state.SweepState`; ``settings`` a
+    :class:`~mmreg.sweeps._settings.PairSettings`. Returns ``(body, sweep_body, ego)``,
+    the ego motion to start the registration of the rest from.
+    """
+    tau = settings.tau
+    match = _MATCH * tau
+    a, sweep = first.points, second.points
+    exclude = (None, None) if ground is None else ground
+    candidates, sweep_candidates = fixed_candidates(
+        a,
+        sweep,
+        reach=_REACH * tau,
+        match=match,
+        exclude=exclude[0],
+        sweep_exclude=exclude[1],
+    )
+    if candidates.sum() < _MIN_POINTS or sweep_candidates.sum() < _MIN_POINTS:
+        return None
+    rest, sweep_rest = a[~candidates], sweep[~sweep_candidates]
+    if len(rest) < _MIN_REST or len(sweep_rest) < _MIN_REST:
+        return None
+    reach = _FINE_REACH * tau if known is not None else max(tau, settings.max_displacement)
+    rotation, translation, _ = ego_motion(
+        rest, sweep_rest, scale=tau, max_displacement=reach, init=known
+    )
+    ego = (rotation, translation)
+    body, sweep_body = confirm_body(
+        a,
+        sweep,
+        candidates,
+        sweep_candidates,
+        ego,
+        match=match,
+        cell=settings.island_radius,
+        near=(np.linalg.norm(a, axis=1) < _REACH * tau) & (True if ground is None else ~ground[0]),
+    )
+    if body.sum() < _MIN_POINTS:
+        return None
+    return body, sweep_body, ego
