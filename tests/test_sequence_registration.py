@@ -294,3 +294,37 @@ def test_each_pair_gets_the_log_s_times_ego_start_and_body(street):
     assert "ego_motion" not in calls[0] and all("ego_motion" in c for c in calls[1:])
     with pytest.raises(ValueError, match="point_times goes with times"):
         SequenceRegistration().fit(log.frames, point_times=offsets)
+
+
+def test_each_frame_s_state_is_computed_once(monkeypatch):
+    """Every frame is the second sweep of one pair and the first of the next: its ground
+    (Patchwork++), islands and k-d tree are made once for both, and the tracks use the
+    same tree."""
+    import mmreg.estimators._sequence as sequence
+    import mmreg.sweeps._sweep_state as sweep_state
+
+    calls = {}
+    for module, name in (
+        (sweep_state, "ground_mask"),
+        (sweep_state, "voxel_islands"),
+        (sweep_state, "cKDTree"),
+        (sequence, "cKDTree"),
+    ):
+        original = getattr(module, name)
+
+        def counted(points, *args, _original=original, _name=name, **kwargs):
+            key = (_name, np.ascontiguousarray(points).tobytes(), args)
+            calls[key] = calls.get(key, 0) + 1
+            return _original(points, *args, **kwargs)
+
+        monkeypatch.setattr(module, name, counted)
+    log = make_lidar_sequence(4, frame_rate=10.0, n_azimuths=256, random_state=0)
+    SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+    assert calls and max(calls.values()) == 1  # nothing made twice from the same points
+    whole = {f.tobytes() for f in log.frames}
+    for name in ("ground_mask", "voxel_islands"):
+        made = [key for key in calls if key[0] == name]
+        assert len(made) >= len(log.frames)
+    made = [key for key in calls if key[0] == "cKDTree" and key[1] in whole]
+    # One tree of every frame that is some pair's second sweep, which the tracks share.
+    assert len(made) == len(log.frames) - 1

@@ -81,6 +81,7 @@ class _Frame:
     pose: np.ndarray | None = None  # estimated sensor pose (world from sensor)
     given_pose: np.ndarray | None = None
     _target: tuple | None = None
+    state: object | None = None  # the pair estimator's per-sweep state (SweepState)
     _view: object | None = None
     # Set by the pair of which this frame is the first sweep:
     pair_labels: np.ndarray | None = None  # the pair's labels of the valid rows
@@ -111,7 +112,10 @@ class _Frame:
         return self._view
 
     def target(self):
-        """``(points, tree, normals)`` of the valid rows, built once."""
+        """``(points, tree, normals)`` of the valid rows, built once (the pairs' own
+        state's, where they keep one)."""
+        if self._target is None and self.state is not None:
+            self._target = self.state.target()
         if self._target is None:
             points = self.returns
             tree = cKDTree(points)
@@ -523,6 +527,13 @@ class SequenceRegistration(BaseEstimator):
         )
         if timed:
             kwargs.update(times=previous.point_times, sweep_times=frame.point_times)
+        if "states" in parameters and hasattr(estimator, "sweep_state"):
+            # Each sweep's ground, trees, normals and islands are computed once, for
+            # both pairs it is in.
+            for sweep in (previous, frame):
+                if sweep.state is None:
+                    sweep.state = estimator.sweep_state(sweep.returns)
+            kwargs["states"] = (previous.state, frame.state)
         if "ego_body" in parameters and previous.body is not None and previous.body.any():
             # The ego vehicle's body is fixed in the sensor's frame: found once, it is
             # the next sweep's points where the last sweep's body points were.
