@@ -112,8 +112,8 @@ log holds it; each pair is fitted as SweepRegistration.fit([a | a + flow], sweep
 The summary's ground column says what was done (masks, dropped, found, kept) and
 n_ground how many points of the first sweep were ground.
 
-Capture times: an Argoverse 2 sweep pair (or a bag's, with a per-point time field) hands
-the capture time of every point (the sweep files' offset_ns, seconds after each sweep's
+Capture times: an Argoverse 2 log or sweep pair (or a bag's, with a per-point time field)
+hands the capture time of every point (the sweep files' offset_ns, seconds after each sweep's
 timestamp) and the time between the two sweeps to SweepRegistration, which moves each
 moving object's points back to where the object was at its sweep's timestamp inside the
 ICP (deskewing). Sweeps whose offsets are all zero are registered without;
@@ -312,9 +312,9 @@ def add_arguments(parser):
         "--no-capture-times",
         dest="capture_times",
         action="store_false",
-        help="sweep pairs (Argoverse 2, bags with per-point times): do not deskew the "
-        "moving objects by the points' capture times; register as if each sweep were "
-        "taken at once",
+        help="logs and sweep pairs (Argoverse 2, bags with per-point times): do not "
+        "deskew the moving objects by the points' capture times; register as if each "
+        "sweep were taken at once",
     )
     parser.add_argument(
         "--overwrite",
@@ -509,6 +509,7 @@ def run(args):
                     topic=args.topic,
                     pattern=args.pattern,
                     poses=args.poses,
+                    capture_times=args.capture_times,
                 )
         except CLIError as error:
             if not isinstance(error.__cause__, NotALogError):

@@ -127,7 +127,9 @@ class LogJob:
     ``name``: the log's name (its folder's); ``folder``: where its results go inside the
     run's folder ("" for a run of one log); ``poses``: hand the log's poses (KITTI's
     ``poses.txt``, Argoverse 2's ego poses) to the estimator, from which its ego motions
-    start; ``files``: every file it reads (for resuming); ``n_frames``: its frames.
+    start; ``files``: every file it reads (for resuming); ``n_frames``: its frames;
+    ``capture_times``: hand the points' capture times (Argoverse 2's ``offset_ns``, a
+    bag's ``t`` field) to the estimator, whose pairs deskew the moving objects.
     """
 
     name: str
@@ -138,6 +140,7 @@ class LogJob:
     folder: str = ""
     files: tuple = ()
     n_frames: int = 0
+    capture_times: bool = True
 
     def inputs(self):
         """The files the log reads."""
@@ -185,7 +188,7 @@ def _log_files(sequence):
     return tuple(found)
 
 
-def _log_job(path, name, folder, topic, pattern, poses, split):
+def _log_job(path, name, folder, topic, pattern, poses, split, capture_times=True):
     """The job of one log; in a split (``split``), a log that cannot be read or has one
     frame is a failed row (the others go on)."""
     from mmreg.datasets import open_sequence
@@ -207,10 +210,11 @@ def _log_job(path, name, folder, topic, pattern, poses, split):
         folder,
         _log_files(sequence),
         len(sequence),
+        bool(capture_times),
     )
 
 
-def log_jobs(path, *, layout="auto", topic=None, pattern=None, poses=True):
+def log_jobs(path, *, layout="auto", topic=None, pattern=None, poses=True, capture_times=True):
     """The logs of a dataset, one job each, in a stable order.
 
     Parameters
@@ -229,6 +233,9 @@ def log_jobs(path, *, layout="auto", topic=None, pattern=None, poses=True):
         A glob picking the frames of a folder holding several kinds.
     poses : bool, default=True
         Hand each log's poses, where it has them, to the estimator.
+    capture_times : bool, default=True
+        Hand the points' capture times, where the log has them (Argoverse 2, a bag's
+        per-point time field), to the estimator, which deskews the moving objects.
 
     Returns
     -------
@@ -263,7 +270,7 @@ def log_jobs(path, *, layout="auto", topic=None, pattern=None, poses=True):
     if layout == "correspondences":
         raise NotALogError(f"{folder}: correspondence files are pairs, not a LiDAR log.")
     name = Path(os.path.abspath(folder)).name or folder.name
-    options = {"topic": topic, "pattern": pattern, "poses": poses}
+    options = {"topic": topic, "pattern": pattern, "poses": poses, "capture_times": capture_times}
 
     def one():
         return [_log_job(folder, name, "", split=False, **options)]
@@ -511,7 +518,15 @@ def fit_log(job, estimator, *, pictures=False, report=None):
         pose = None if poses is None else poses[k]
         held[k] = np.asarray(frame.points, float)
         begin = time.perf_counter()
-        model.partial_fit(frame.points, time=stamp if state["timed"] else None, pose=pose)
+        capture = None
+        if state["timed"] and job.capture_times and frame.times is not None:
+            capture = frame.times  # the pairs deskew the moving objects
+        model.partial_fit(
+            frame.points,
+            time=stamp if state["timed"] else None,
+            pose=pose,
+            point_times=capture,
+        )
         fit_s[k] = time.perf_counter() - begin
         take(model.finished_)
         _interrupt.check()
