@@ -162,7 +162,8 @@ class SequenceRegistration(BaseEstimator):
     pair_estimator : estimator or None, default=None
         Registers two raw sweeps: ``fit(points1, sweep=points2, ego_motion=(R, t))`` with
         ``labels_``, ``moving_``, ``static_cluster_``, ``rotations_``, ``translations_``,
-        ``flow_`` and ``ego_motion_``. None: ``SweepRegistration(random_state=...)``.
+        ``flow_`` and ``ego_motion_``; cloned for every pair, and seeded from
+        ``random_state`` when its own is None. None: ``SweepRegistration()``.
     tau : float, default=5.0
         The one length, in the points' units (5 for metres, as the pair estimator's).
     lookahead : int, default=2
@@ -414,11 +415,17 @@ class SequenceRegistration(BaseEstimator):
 
     # ------------------------------------------------------------------ one pair
     def _pair_estimator(self):
-        if self.pair_estimator is not None:
-            return clone(self.pair_estimator)
-        from mmreg.estimators._two_sweeps import SweepRegistration
+        """A fresh pair estimator; one whose ``random_state`` is None is seeded from
+        ours, a new seed for every pair."""
+        seed = self._state.rng.randint(2**31 - 1)
+        if self.pair_estimator is None:
+            from mmreg.estimators._two_sweeps import SweepRegistration
 
-        return SweepRegistration(random_state=self._state.rng.randint(2**31 - 1))
+            return SweepRegistration(random_state=seed)
+        estimator = clone(self.pair_estimator)
+        if estimator.get_params(deep=False).get("random_state", 0) is None:
+            estimator.set_params(random_state=seed)
+        return estimator
 
     def _ego_start(self, previous, frame):
         """The ego motion's start: the poses given, else the last ego motion (constant
