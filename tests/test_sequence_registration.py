@@ -242,14 +242,14 @@ def test_online_memory_is_bounded():
     """Only the tracks and lookahead + 2 frames are kept, however long the log."""
     import gc
 
-    from mmreg.estimators._sequence import _Frame
+    from mmreg.tracking._log import LogFrame
 
     log = make_lidar_sequence(8, frame_rate=10.0, n_azimuths=256, random_state=0)
     est = SequenceRegistration(random_state=0, lookahead=1)
 
     def frames_alive():
         gc.collect()
-        return sum(isinstance(o, _Frame) for o in gc.get_objects())
+        return sum(isinstance(o, LogFrame) for o in gc.get_objects())
 
     before = frames_alive()  # other tests' estimators hold none once fitted
     held = []
@@ -300,8 +300,8 @@ def test_each_frame_s_state_is_computed_once(monkeypatch):
     """Every frame is the second sweep of one pair and the first of the next: its ground
     (Patchwork++), islands and k-d tree are made once for both, and the tracks use the
     same tree."""
-    import mmreg.estimators._sequence as sequence
     import mmreg.sweeps._sweep_state as sweep_state
+    import mmreg.tracking._log as sequence
 
     calls = {}
     for module, name in (

@@ -3,150 +3,29 @@
 :class:`SequenceRegistration` registers each pair of consecutive sweeps with a pair
 estimator (:class:`~mmreg.SweepRegistration` by default), starting its ego motion from the
 last one (constant velocity, as KISS-ICP does), and keeps the moving objects as tracks in
-the world frame (:mod:`mmreg.tracking`). A track lives inside the registration: its
-predicted motion is tested point by point against the static world's in the next pair
-(:mod:`mmreg.tracking._evidence`), so an object that pair alone misses is still found,
-and a motion that no second pair confirms (a ghost) is never reported.
+the world frame. A track lives inside the registration: its predicted motion is tested
+point by point against the static world's in the next pair, so an object that pair alone
+misses is still found, and a motion that no second pair confirms (a ghost) is never
+reported. The steps are :class:`mmreg.tracking._log.LogTracker`'s; this module is the
+scikit-learn estimator around them.
 """
 
-import inspect
-from dataclasses import dataclass, field
 from numbers import Integral, Real
 
 import numpy as np
 import pandas as pd
-from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, clone
-from sklearn.utils import Bunch, check_random_state
+from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval
 
-from mmreg._validation import invalid_rows
-from mmreg.sweeps._explained import EXPLAINED_SPACINGS
-from mmreg.sweeps._ground import is_z_up_sweep
-from mmreg.sweeps._icp import SurfaceNormals
-from mmreg.sweeps._motion_bounds import impossible_motions
-from mmreg.tracking._evidence import near_points, track_claim
-from mmreg.tracking._level_icp import level_icp, level_part
-from mmreg.tracking._motion import (
-    compose,
-    inverse,
-    predicted_motion,
-    to_matrix,
-    transform,
-    twist_of,
-)
-from mmreg.tracking._tracks import Track, consistent_motion, overlap_matrix
-from mmreg.tracking._visibility import RangeView
+from mmreg.tracking._log import LogTracker
 
 __all__ = ["SequenceRegistration"]
 
-# The one length: tau (5 for metres); the others in its units.
-_METRE_TAU = 5.0
-# Where a track's points may be found around their prediction: this share of tau, plus
-# a quarter of the predicted displacement (a car brakes, a walker turns).
-_NEAR = 0.1
-_MODEL_ERROR = 0.25
-# A track's points that only its motion explains may lie that far from its predicted
-# points (faces come into view); those that the ego motion explains too (a side sliding
-# along itself) this far (this share of tau).
-_TIGHT = 0.05
-# A detection of a moving cluster belongs to the track whose prediction covers at least
-# this share of its points.
-_MIN_OVERLAP = 0.3
-# Two measured motions of one object agree within half the displacement plus this
-# share of tau (the pair's motions are centimetres off; a car brakes or turns).
-_MOTION_TOLERANCE = 0.04
-# The prediction's twist is tried at these shares of its speed.
-_SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
-# The ego vehicle's body (as SweepRegistration finds it): within this share of tau of the
-# sensor, and where the last sweep's body was within this share.
-_BODY_REACH = 0.6
-_BODY_MATCH = 0.01
-# Two tracks' pieces this close (share of tau) that move this alike (share of their
-# displacement, and of tau) are one object.
-_PIECES = 0.2
-_ALIKE = 0.1
-_ALIKE_NOISE = 0.01
-# The least evidence a track's motion needs, in points (a quarter of a small object's).
-_MIN_EVIDENCE = 4
-# A place is hidden from a sweep behind a return this much nearer (share of tau).
-_HIDDEN = 0.05
 # Gauss-Newton steps of the default pair estimator's ICPs (SweepRegistration's own: 30).
 _PAIR_ICP_ITER = 15
-# Points kept per track (its shape for the prediction and the association).
-_TRACK_POINTS = 2000
-
-
-@dataclass
-class _Frame:
-    """One sweep as the sequence holds it while it is needed."""
-
-    index: int
-    points: np.ndarray  # every row the user gave
-    valid: np.ndarray  # rows that are returns
-    time: float
-    pose: np.ndarray | None = None  # estimated sensor pose (world from sensor)
-    given_pose: np.ndarray | None = None
-    _target: tuple | None = None
-    state: object | None = None  # the pair estimator's per-sweep state (SweepState)
-    _view: object | None = None
-    # Set by the pair of which this frame is the first sweep:
-    pair_labels: np.ndarray | None = None  # the pair's labels of the valid rows
-    pair_flow: np.ndarray | None = None
-    body: np.ndarray | None = None  # valid rows on the ego vehicle's body
-    ground: np.ndarray | None = None  # valid rows on the ground
-    scale: float = np.nan  # the ego ICP's robust residual scale, to the next frame
-    track_of: np.ndarray | None = None  # track key of each valid row, -1 none
-    motions: dict = field(default_factory=dict)  # track key -> 4 x 4 motion to the next
-    rows: list = field(default_factory=list)  # per-track table rows (key, ...)
-    # Set by the pair of which this frame is the second sweep: the valid rows where the
-    # tracks seen in the first sweep land (track key, -1 none), and those tracks' twists.
-    carried: np.ndarray | None = None
-    carried_twists: dict = field(default_factory=dict)
-    ego: np.ndarray | None = None  # 4 x 4 ego motion to the next frame
-    up: np.ndarray | None = None  # the vertical, in a z-up LiDAR sweep
-    seconds: bool = False  # whether ``time`` is in seconds (else the frame's index)
-    point_times: np.ndarray | None = None  # capture times of the valid rows, seconds
-
-    @property
-    def returns(self):
-        return self.points[self.valid]
-
-    def view(self):
-        """The range image of the valid rows, built once."""
-        if self._view is None:
-            self._view = RangeView(self.returns)
-        return self._view
-
-    def target(self):
-        """``(points, tree, normals)`` of the valid rows, built once (the pairs' own
-        state's, where they keep one)."""
-        if self._target is None and self.state is not None:
-            self._target = self.state.target()
-        if self._target is None:
-            points = self.returns
-            tree = cKDTree(points)
-            self._target = (points, tree, SurfaceNormals(points, tree, 10))
-        return self._target
-
-
-def _box(points):
-    """Length, width, height and yaw of the points' box (principal axes in x-y)."""
-    xy = points[:, :2] - points[:, :2].mean(axis=0)
-    if len(points) < 3:
-        yaw = 0.0
-    else:
-        _, vectors = np.linalg.eigh(xy.T @ xy)
-        yaw = float(np.arctan2(vectors[1, 1], vectors[0, 1]))
-    c, s = np.cos(yaw), np.sin(yaw)
-    along = xy @ [c, s]
-    across = xy @ [-s, c]
-    return (
-        float(np.ptp(along)),
-        float(np.ptp(across)),
-        float(np.ptp(points[:, 2])),
-        yaw,
-    )
+# The default pair estimator's smallest island (SweepRegistration's min_island_size).
+_MIN_ISLAND_SIZE = 12
 
 
 class SequenceRegistration(BaseEstimator):
@@ -239,7 +118,6 @@ class SequenceRegistration(BaseEstimator):
         self.frame_rate = frame_rate
         self.random_state = random_state
 
-    # ------------------------------------------------------------------ public API
     def fit(self, frames, y=None, *, times=None, poses=None, point_times=None):
         """Register a whole log.
 
@@ -282,15 +160,15 @@ class SequenceRegistration(BaseEstimator):
         results = []
         for k in range(n):
             frame = frames[k]
-            self._step(
+            self.finished_ = self._tracker.step(
                 getattr(frame, "points", frame),
                 None if times is None else times[k],
                 None if poses is None else poses[k],
                 None if point_times is None else point_times[k],
             )
             results.extend(self.finished_)
-        results.extend(self._close())
-        del self._state  # a later partial_fit starts a log of its own
+        results.extend(self._tracker.close())
+        del self._tracker  # a later partial_fit starts a log of its own
         self.labels_ = [r.labels for r in results]
         self.moving_ = [r.moving for r in results]
         self.flows_ = [r.flow for r in results]
@@ -300,7 +178,7 @@ class SequenceRegistration(BaseEstimator):
         self.tracks_ = (
             pd.concat(tables, ignore_index=True).sort_values(["track", "frame"], ignore_index=True)
             if tables
-            else self._table([])
+            else LogTracker._table([])
         )
         self.n_frames_ = n
         self.n_tracks_ = int(self.tracks_["track"].nunique()) if len(self.tracks_) else 0
@@ -332,29 +210,36 @@ class SequenceRegistration(BaseEstimator):
         -------
         self
         """
-        if not hasattr(self, "_state"):
+        if not hasattr(self, "_tracker"):
             self._validate_params()
             self._reset()
         if pose is not None:
             pose = self._check_poses(np.asarray(pose, dtype=float)[None], 1)[0]
         if point_times is not None and time is None:
             raise ValueError("point_times goes with time: the frame's time in seconds.")
-        self._step(points, time, pose, point_times)
+        self.finished_ = self._tracker.step(points, time, pose, point_times)
         return self
 
     def finish(self):
         """End an online log: ``finished_`` holds the frames still pending, the last one
         included (its labels carried from the frame before, its flow NaN), and the next
         :meth:`partial_fit` starts a new log."""
-        if not hasattr(self, "_state"):
+        if not hasattr(self, "_tracker"):
             raise ValueError("finish() ends a log that partial_fit() started; none was.")
-        self.finished_ = self._close()
-        del self._state
+        self.finished_ = self._tracker.close()
+        del self._tracker
         return self
 
-    # ------------------------------------------------------------------ state
     def _reset(self):
-        self._state = _LogState(rng=check_random_state(self.random_state))
+        self._tracker = LogTracker(
+            self._pair_estimator,
+            tau=self.tau,
+            lookahead=self.lookahead,
+            max_misses=self.max_misses,
+            frame_rate=self.frame_rate,
+            min_points=self._min_points(),
+            rng=check_random_state(self.random_state),
+        )
         self.finished_ = []
 
     def _check_times(self, times, n):
@@ -375,59 +260,9 @@ class SequenceRegistration(BaseEstimator):
             raise ValueError(f"poses must have shape ({n}, 4, 4) and be finite.")
         return poses
 
-    def _time(self, index, time):
-        if time is not None:
-            return float(time)
-        return index / self.frame_rate if self.frame_rate is not None else float(index)
-
-    def _step(self, points, time, pose, point_times=None):
-        state = self._state
-        points = np.asarray(points, dtype=np.float64)
-        if points.ndim != 2 or points.shape[1] < 3:
-            raise ValueError(f"a frame must have shape (n, 3); got {points.shape}.")
-        points = points[:, :3]
-        valid = ~invalid_rows(np.hstack([points, points]))
-        index = state.n_frames
-        frame = _Frame(index, points, valid, self._time(index, time), given_pose=pose)
-        if point_times is not None:
-            point_times = np.asarray(point_times, dtype=float)
-            if point_times.shape != (len(points),) or not np.all(np.isfinite(point_times)):
-                raise ValueError(
-                    f"frame {index}: point_times must be {len(points)} finite numbers, "
-                    "one per point."
-                )
-            frame.point_times = point_times[valid]
-        frame.seconds = time is not None or self.frame_rate is not None
-        if valid.sum() >= 3 and is_z_up_sweep(points[valid]):
-            frame.up = np.array([0.0, 0.0, 1.0])
-        if state.previous is None:
-            frame.pose = np.eye(4) if pose is None else np.asarray(pose, dtype=float)
-        else:
-            if frame.time <= state.previous.time:
-                raise ValueError(f"frame {index}: its time does not follow the last frame's.")
-            self._register_pair(state.previous, frame)
-            state.pending.append(state.previous)
-        state.previous = frame
-        state.n_frames += 1
-        chain = [*state.pending, frame]  # each pending frame and the one after it
-        self.finished_ = [
-            self._result(f, after)
-            for f, after in zip(chain, chain[1:], strict=False)
-            if f.index <= index - 1 - self.lookahead
-        ]
-        state.pending = [f for f in state.pending if f.index > index - 1 - self.lookahead]
-
-    def _close(self):
-        state = self._state
-        chain = [*state.pending, state.previous] if state.previous is not None else []
-        state.pending = []
-        return [self._result(f, after) for f, after in zip(chain, [*chain[1:], None], strict=True)]
-
-    # ------------------------------------------------------------------ one pair
-    def _pair_estimator(self):
-        """A fresh pair estimator; one whose ``random_state`` is None is seeded from
-        ours, a new seed for every pair."""
-        seed = self._state.rng.randint(2**31 - 1)
+    def _pair_estimator(self, seed):
+        """A fresh pair estimator; one whose ``random_state`` is None is seeded with
+        ``seed`` (a new one for every pair, drawn from ours)."""
         if self.pair_estimator is None:
             from mmreg.estimators._two_sweeps import SweepRegistration
 
@@ -437,599 +272,11 @@ class SequenceRegistration(BaseEstimator):
             estimator.set_params(random_state=seed)
         return estimator
 
-    def _ego_start(self, previous, frame):
-        """The ego motion's start: the poses given, else the last ego motion (constant
-        velocity), scaled to this interval; None for the first pair."""
-        if previous.given_pose is not None and frame.given_pose is not None:
-            return compose(inverse(frame.given_pose), previous.given_pose)
-        last = self._state.last_ego
-        if last is None:
-            return None
-        motion, dt = last
-        ratio = (frame.time - previous.time) / dt
-        omega, velocity = twist_of(motion, np.zeros(3), 1.0)
-        return predicted_motion(omega, velocity, np.zeros(3), ratio)
-
-    def _register_pair(self, previous, frame):
-        """One step: register the pair, then predict, associate and update the tracks.
-
-        ``previous`` is the first sweep; its labels are what this pair and the tracks
-        say of it. ``frame`` (the second sweep) gets its pose.
-        """
-        state = self._state
-        state.last_first = previous
-        dt = frame.time - previous.time
-        pair = self._fit_pair(previous, frame, dt)
-        first = previous.returns
-        predictions = self._predict(previous.time, previous.pose)
-        detections = pair.detections
-        overlap = overlap_matrix(
-            [first[rows] for rows, _ in detections.values()],
-            [points for points, _ in predictions],
-            [radius for _, radius in predictions],
-        )
-        column = {j: i for i, j in enumerate(detections)}
-        free = ~(pair.ground | previous.body)
-        for rows, _ in detections.values():
-            free[rows] = False
-        previous.track_of = np.full(len(first), -1, dtype=np.intp)
-        seen = {}  # track key -> points detected in ``previous``
-        # The confirmed and longest-lived tracks choose first: two tracks born on two
-        # pieces of one object must not take it in turns.
-        tracks = state.tracks
-        order = sorted(range(len(tracks)), key=lambda i: (not tracks[i].confirmed, -tracks[i].hits))
-        for i in order:
-            track = tracks[i]
-            mine = [j for j in detections if overlap[column[j], i] >= _MIN_OVERLAP]
-            found = self._track_detection(
-                track, previous, frame, pair, [detections[j] for j in mine], predictions[i], free
-            )
-            if found is None:
-                continue
-            rows, motion = found
-            free[rows] = False
-            self._observe(track, previous, frame, rows, motion, dt)
-            seen[track.key] = len(rows)
-            for j in mine:
-                del detections[j]
-        # Moving clusters no track holds: tentative tracks.
-        for rows, motion in detections.values():
-            track = self._born(previous, frame, rows, motion, dt)
-            seen[track.key] = len(rows)
-        self._join_pieces(previous, seen, dt)
-        for track in self._confirm_and_end(previous, seen):
-            self._extend_back(track, previous)
-        self._carry(previous, frame)
-
-    def _join_pieces(self, previous, seen, dt):
-        """Tracks seen on pieces within a fifth of tau of each other that move alike (their
-        displacements within a tenth of each other and a hundredth of tau) are one object
-        (a pair may cut a far car in two): the younger joins the older, and its key names
-        the older from now on, in the pending frames too."""
-        state = self._state
-        tracks = sorted(
-            (t for t in state.tracks if t.key in seen),
-            key=lambda t: (not t.confirmed, -t.hits, t.key),
-        )
-        first = previous.returns
-        joined = set()
-        for i, keep in enumerate(tracks):
-            if keep.key in joined:
-                continue
-            for other in tracks[i + 1 :]:
-                if other.key in joined:
-                    continue
-                mine = first[previous.track_of == keep.key]
-                theirs = first[previous.track_of == other.key]
-                distance, _ = cKDTree(mine).query(theirs, distance_upper_bound=_PIECES * self.tau)
-                if not np.isfinite(distance).any():
-                    continue
-                # Pieces of one body move as one: far more alike than two tracks' motions
-                # that merely follow each other.
-                apart = np.linalg.norm((keep.velocity - other.velocity) * dt)
-                if apart > _ALIKE * np.linalg.norm(keep.velocity * dt) + _ALIKE_NOISE * self.tau:
-                    continue
-                previous.track_of[previous.track_of == other.key] = keep.key
-                previous.motions.pop(other.key, None)
-                state.alias[other.key] = keep.key
-                seen[keep.key] += seen.pop(other.key)
-                points = transform(previous.pose, first[previous.track_of == keep.key])
-                keep.points = _sample(points, state.rng)
-                keep.hits = max(keep.hits, other.hits)
-                joined.add(other.key)
-        state.tracks = [t for t in state.tracks if t.key not in joined]
-
-    def _identity(self, key):
-        """The public id of track ``key`` (0: none), through the tracks it joined."""
-        state = self._state
-        while key in state.alias:
-            key = state.alias[key]
-        return state.identity.get(key, 0)
-
-    def _carry(self, previous, frame):
-        """Where each track seen in ``previous`` lands in ``frame``: the points of the
-        second sweep within two of its spacings (and a twentieth of tau) of the track's
-        points moved by its motion. They are the track's in ``frame`` where the next pair
-        does not say otherwise (it may miss the object, or there may be no next pair)."""
-        points, tree, normals = frame.target()
-        frame.carried = np.full(len(points), -1, dtype=np.intp)
-        free = ~frame.body
-        for key, motion in previous.motions.items():
-            moved = transform(motion, previous.returns[previous.track_of == key])
-            near = near_points(points, moved, _TIGHT * self.tau, np.flatnonzero(free))
-            if not len(near):
-                continue
-            distance, _ = cKDTree(moved).query(points[near])
-            near = near[distance <= EXPLAINED_SPACINGS * normals.spacing(near)]
-            if len(near) < _MIN_EVIDENCE:  # a few points are no object's
-                continue
-            frame.carried[near] = key
-            free[near] = False
-            track = next((t for t in self._state.tracks if t.key == key), None)
-            if track is not None:
-                frame.carried_twists[key] = (track.omega.copy(), track.velocity.copy())
-
-    def _fit_pair(self, previous, frame, dt):
-        """Register the two sweeps; the first sweep's labels, flow, body and ground, and
-        the moving clusters as detections ``{j: (rows, 4 x 4 motion)}``."""
-        state = self._state
-        start = self._ego_start(previous, frame)
-        first, second = previous.returns, frame.returns
-        estimator = self._pair_estimator()
-        kwargs = {} if start is None else {"ego_motion": (start[:3, :3], start[:3, 3])}
-        parameters = _fit_parameters(estimator)
-        if frame.seconds and "interval" in parameters:
-            kwargs["interval"] = dt  # bounds the objects' motions by what road users do
-        # With capture times (any offset at all) the pair deskews the moving objects.
-        timed = (
-            frame.seconds
-            and "times" in parameters
-            and previous.point_times is not None
-            and frame.point_times is not None
-            and (np.any(previous.point_times != 0) or np.any(frame.point_times != 0))
-        )
-        if timed:
-            kwargs.update(times=previous.point_times, sweep_times=frame.point_times)
-        if "states" in parameters and hasattr(estimator, "sweep_state"):
-            # Each sweep's ground, trees, normals and islands are computed once, for
-            # both pairs it is in.
-            for sweep in (previous, frame):
-                if sweep.state is None:
-                    sweep.state = estimator.sweep_state(sweep.returns)
-            kwargs["states"] = (previous.state, frame.state)
-        if "ego_body" in parameters and previous.body is not None and previous.body.any():
-            # The ego vehicle's body is fixed in the sensor's frame: found once, it is
-            # the next sweep's points where the last sweep's body points were.
-            kwargs["ego_body"] = (previous.body, self._carried_body(previous, second))
-        pair = estimator.fit(first, sweep=second, **kwargs)
-        ego = to_matrix(*pair.ego_motion_)
-        state.last_ego = (ego, dt)
-        previous.ego = ego
-        frame.pose = compose(previous.pose, inverse(ego))
-        labels = np.asarray(pair.labels_)
-        previous.pair_labels = labels
-        previous.pair_flow = np.asarray(pair.flow_)
-        previous.body = _mask(getattr(pair, "ego_body_mask_", None), len(first))
-        frame.body = _mask(getattr(pair, "sweep_ego_body_mask_", None), len(second))
-        static = int(pair.static_cluster_)
-        detections = {
-            j: (
-                np.flatnonzero(labels == j),
-                to_matrix(pair.rotations_[j], pair.translations_[j]),
-            )
-            for j in np.flatnonzero(np.asarray(pair.moving_, dtype=bool))
-            if j != static and np.any(labels == j)
-        }
-        scale = float(getattr(pair, "ego_scale_", np.nan))
-        previous.scale = scale if np.isfinite(scale) and scale > 0 else 0.002 * self.tau
-        previous.ground = _mask(getattr(pair, "ground_mask_", None), len(first))
-        return _Pair(ego=ego, scale=previous.scale, ground=previous.ground, detections=detections)
-
-    def _carried_body(self, previous, points):
-        """The points of a sweep within the body's matching distance of where the last
-        sweep's body points were, in the same sensor coordinates."""
-        body = previous.returns[previous.body]
-        near = np.linalg.norm(points, axis=1) <= _BODY_REACH * self.tau
-        carried = np.zeros(len(points), dtype=bool)
-        if near.any():
-            distance, _ = cKDTree(body).query(
-                points[near], distance_upper_bound=_BODY_MATCH * self.tau
-            )
-            carried[near] = np.isfinite(distance)
-        return carried
-
-    def _predict(self, time, pose):
-        """Every track's points predicted to ``time``, in the sensor frame at ``pose``,
-        and how far from them its points may be found."""
-        to_sensor = inverse(pose)
-        # The first prediction repeats the motion the last pair measured: only the
-        # object's shape changes (faces come into view). Coasting adds the model's error.
-        return [
-            (
-                transform(to_sensor, track.predicted_points(time)),
-                _NEAR * self.tau * (1 + track.misses)
-                + _MODEL_ERROR
-                * np.linalg.norm(track.velocity)
-                * (time - track.time)
-                * track.misses,
-            )
-            for track in self._state.tracks
-        ]
-
-    def _track_detection(self, track, previous, frame, pair, clusters, prediction, free):
-        """The points of ``previous`` that are ``track``'s, and their motion, or None.
-
-        ``clusters`` are the pair's moving clusters that cover its prediction. The
-        track's motion is refined from its prediction (and the clusters' motions) on
-        the points no other track holds near the prediction (``free``) and the
-        clusters' (see :func:`mmreg.tracking._evidence.track_claim`); it claims the
-        points it alone explains, and those of its own shape it explains too.
-        """
-        dt = frame.time - previous.time
-        first = previous.returns
-        points, radius = prediction
-        centre = transform(previous.pose, points).mean(axis=0)
-        own = (
-            np.concatenate([rows for rows, _ in clusters])
-            if clusters
-            else np.zeros(0, dtype=np.intp)
-        )
-        near = np.union1d(near_points(first, points, radius, np.flatnonzero(free)), own)
-        tight = np.union1d(near_points(first, points, _TIGHT * self.tau, near), own)
-        # The prediction, the same twist slower or faster (a car brakes at a light,
-        # pulls away), and the clusters' own motions: each a start for the track's ICP.
-        starts = [
-            compose(
-                inverse(frame.pose),
-                predicted_motion(track.omega, track.velocity, centre, dt * speed),
-                previous.pose,
-            )
-            for speed in _SPEEDS
-        ] + [motion for _, motion in clusters]
-        min_points = self._min_points()
-        # A confirmed track needs less new evidence (its past shows it moves), and a
-        # small object (a walker of 20 points) a quarter of its points.
-        needed = min_points // 2 if track.confirmed else min_points
-        needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
-        claim = track_claim(
-            first,
-            near,
-            tight,
-            starts,
-            pair.ego,
-            frame.target(),
-            pair.scale,
-            max_distance=0.2 * self.tau,
-            min_evidence=needed,
-            up=previous.up,
-            view=frame.view(),
-            margin=_HIDDEN * self.tau,
-        )
-        if claim is not None:
-            rows, motion = np.union1d(claim.rows, own), claim.motion
-        elif clusters and track.confirmed:
-            rows, motion = own, max(clusters, key=lambda c: len(c[0]))[1]
-        else:
-            return None
-        # A track takes a detection only where its motion follows the track's.
-        world = compose(frame.pose, motion, inverse(previous.pose))
-        _, velocity = twist_of(world, transform(previous.pose, first[rows]).mean(axis=0), dt)
-        if not consistent_motion(track, velocity, dt, _MOTION_TOLERANCE * self.tau):
-            return None
-        if not self._possible(previous, rows, motion, dt):
-            return None
-        return rows, motion
-
-    def _observe(self, track, previous, frame, rows, motion, dt):
-        """``track`` seen at ``rows`` of ``previous``, moving by ``motion`` to ``frame``."""
-        world = compose(frame.pose, motion, inverse(previous.pose))
-        points = transform(previous.pose, previous.returns[rows])
-        track.update(_sample(points, self._state.rng), previous.time, previous.index, world, dt)
-        previous.track_of[rows] = track.key
-        previous.motions[track.key] = motion
-
-    def _born(self, previous, frame, rows, motion, dt):
-        """A tentative track for a moving cluster no track holds.
-
-        In z-up sweeps its motion is fitted again, level (a turn about the vertical and
-        a shift, :mod:`mmreg.tracking._level_icp`), from the cluster's: a far car's few
-        points fit a free motion that tilts it by tens of degrees.
-        """
-        state = self._state
-        first = previous.returns
-        if previous.up is not None:
-            level = level_part(motion, previous.ego, first[rows].mean(axis=0), previous.up)
-            motion = level_icp(
-                first[rows],
-                level,
-                previous.ego,
-                frame.target(),
-                max_distance=0.2 * self.tau,
-                up=previous.up,
-            )
-        world = compose(frame.pose, motion, inverse(previous.pose))
-        points = transform(previous.pose, previous.returns[rows])
-        omega, velocity = twist_of(world, points.mean(axis=0), dt)
-        track = Track(
-            key=state.next_key,
-            points=_sample(points, state.rng),
-            time=previous.time,
-            frame=previous.index,
-            omega=omega,
-            velocity=velocity,
-        )
-        state.next_key += 1
-        state.tracks.append(track)
-        previous.track_of[rows] = track.key
-        previous.motions[track.key] = motion
-        return track
-
-    def _confirm_and_end(self, previous, seen):
-        """Confirm the tentative tracks seen twice; coast the others, ending those that
-        missed too many frames (a tentative one at its first miss)."""
-        state = self._state
-        alive, confirmed = [], []
-        for track in state.tracks:
-            if track.key in seen:
-                if not track.confirmed and track.hits >= 2:
-                    state.n_confirmed += 1
-                    track.identity = state.n_confirmed
-                    state.identity[track.key] = track.identity
-                    confirmed.append(track)
-                previous.rows.append(
-                    _row(
-                        track.key,
-                        track.points,
-                        track.omega,
-                        track.velocity,
-                        previous,
-                        seen[track.key],
-                    )
-                )
-            else:
-                track.coast(previous.time, previous.index)
-                if track.misses > (self.max_misses if track.confirmed else 0):
-                    continue
-            alive.append(track)
-        state.tracks = alive
-        return confirmed
-
-    def _extend_back(self, track, latest):
-        """A newly confirmed track's points in the frames before its first detection,
-        while they are pending: its twist run backwards, claimed as in a forward pair.
-
-        A pair often sees an object move only once it is near; the frames before, still
-        within ``lookahead``, get what the track's motion claims there.
-        """
-        frames = {f.index: f for f in (*self._state.pending, latest)}
-        later = frames.get(track.first_frame)
-        while later is not None and track.first_frame - 1 in frames:
-            frame = frames[track.first_frame - 1]
-            seen = later.track_of == track.key
-            if frame.track_of is None or seen.sum() < _MIN_EVIDENCE:
-                return
-            points = transform(later.pose, later.returns[seen])
-            dt = later.time - frame.time
-            centre = points.mean(axis=0)
-            starts, predicted = [], []
-            for speed in _SPEEDS:
-                # The world motion that brought the object from ``frame`` to ``later``.
-                before = centre - track.velocity * dt * speed
-                motion = predicted_motion(track.omega, track.velocity, before, dt * speed)
-                starts.append(compose(inverse(later.pose), motion, frame.pose))
-                predicted.append(transform(inverse(motion), points))
-            prediction = transform(inverse(frame.pose), predicted[0])
-            first = frame.returns
-            free = ~(frame.ground | frame.body) & (frame.track_of < 0)
-            near = near_points(first, prediction, _NEAR * self.tau, np.flatnonzero(free))
-            tight = near_points(first, prediction, _TIGHT * self.tau, near)
-            claim = track_claim(
-                first,
-                near,
-                tight,
-                starts,
-                frame.ego,
-                later.target(),
-                frame.scale,
-                max_distance=0.2 * self.tau,
-                min_evidence=min(self._min_points(), max(_MIN_EVIDENCE, len(points) // 4)),
-                up=frame.up,
-                view=later.view(),
-                margin=_HIDDEN * self.tau,
-            )
-            if claim is None or not self._possible(frame, claim.rows, claim.motion, dt):
-                return
-            frame.track_of[claim.rows] = track.key
-            frame.motions[track.key] = claim.motion
-            world = compose(later.pose, claim.motion, inverse(frame.pose))
-            found = transform(frame.pose, first[claim.rows])
-            omega, velocity = twist_of(world, found.mean(axis=0), dt)
-            frame.rows.append(_row(track.key, found, omega, velocity, frame, len(claim.rows)))
-            track.first_frame -= 1
-            later = frame
-
-    def _possible(self, frame, rows, motion, dt):
-        """Whether ``motion`` of ``frame``'s points ``rows`` is one a road user can make
-        (:mod:`mmreg.sweeps._motion_bounds`: speed and turn with the interval in seconds,
-        no level sheet sliding along itself in a z-up sweep)."""
-        points = frame.returns[rows]
-        labels = np.ones(len(rows), dtype=np.intp)
-        rotations = np.stack([frame.ego[:3, :3], motion[:3, :3]])
-        translations = np.stack([frame.ego[:3, 3], motion[:3, 3]])
-        impossible, _ = impossible_motions(
-            points,
-            labels,
-            (rotations, translations),
-            0,
-            scale=self.tau,
-            reach=np.inf,
-            interval=dt if frame.seconds else None,
-            up=frame.up,
-        )
-        return not impossible[1]
-
     def _min_points(self):
+        """The pair estimator's smallest island: the most evidence a track needs."""
         estimator = self.pair_estimator
         if estimator is not None:
             value = estimator.get_params(deep=False).get("min_island_size")
             if isinstance(value, Integral):
                 return int(value)
-        return 12
-
-    # ------------------------------------------------------------------ results
-    def _result(self, frame, after=None):
-        """Frame ``frame``'s final labels, moving flags, flow and table rows.
-
-        A point is a confirmed track's where the pair of which ``frame`` is the first
-        sweep gave it to the track, else where the pair before carried the track onto it
-        (:meth:`_carry`). ``after`` is the next frame (None for the last one: no flow).
-        """
-        n_valid = int(frame.valid.sum())
-
-        def ids(keys):
-            if keys is None:
-                return np.zeros(n_valid, dtype=np.intp)
-            names = {int(k): self._identity(int(k)) for k in np.unique(keys)}
-            return np.array([names[int(k)] for k in keys], dtype=np.intp).reshape(-1)
-
-        own, carried = ids(frame.track_of), ids(frame.carried)
-        if frame.pair_labels is not None:
-            valid_labels = np.where(frame.pair_labels >= 0, 0, -1)
-        else:
-            valid_labels = np.zeros(n_valid, dtype=np.intp)
-        valid_labels = np.where(own > 0, own, np.where(carried > 0, carried, valid_labels))
-        if frame.body is not None:
-            valid_labels[frame.body] = -1
-        labels = np.full(len(frame.points), -1, dtype=np.intp)
-        labels[frame.valid] = valid_labels
-        body = np.zeros(len(frame.points), dtype=bool)
-        if frame.body is not None:
-            body[frame.valid] = frame.body
-        flow = np.full((len(frame.points), 3), np.nan)
-        if after is not None:
-            flow[frame.valid] = self._flow(frame, after, own, carried)
-        # One row per track: pieces joined later keep the row with the most points.
-        best = {}
-        for r in frame.rows:
-            r["track"] = self._identity(r["key"])
-            if r["track"] > 0 and r["points"] > best.get(r["track"], {"points": -1})["points"]:
-                best[r["track"]] = r
-        rows = list(best.values())
-        return Bunch(
-            index=frame.index,
-            time=frame.time,
-            labels=labels,
-            moving=labels > 0,
-            flow=flow,
-            body=body,
-            valid=frame.valid.copy(),
-            pose=frame.pose,
-            tracks=self._table(rows),
-        )
-
-    def _flow(self, frame, after, own, carried):
-        """The flow of ``frame``'s valid rows to ``after``: the pair's, a confirmed track's
-        own motion on its points, and for a track carried onto points the pair missed,
-        its last twist (constant velocity)."""
-        first = frame.returns
-        flow = frame.pair_flow.copy()
-        for key, motion in frame.motions.items():
-            rows = frame.track_of == key
-            # A ghost, never confirmed, moves with the static world.
-            moved = motion if self._identity(key) > 0 else frame.ego
-            flow[rows] = transform(moved, first[rows]) - first[rows]
-        for key, (omega, velocity) in frame.carried_twists.items():
-            rows = (frame.carried == key) & (own <= 0) & (carried > 0)
-            if not rows.any():
-                continue
-            world = transform(frame.pose, first[rows])
-            dt = after.time - frame.time
-            motion = predicted_motion(omega, velocity, world.mean(axis=0), dt)
-            moved = compose(inverse(after.pose), motion, frame.pose)
-            flow[rows] = transform(moved, first[rows]) - first[rows]
-        return flow
-
-    @staticmethod
-    def _table(rows):
-        columns = [
-            "track", "frame", "time", "x", "y", "z", "length", "width", "height", "yaw",
-            "vx", "vy", "vz", "speed", "yaw_rate", "points",
-        ]  # fmt: skip
-        rows = list(rows)
-        table = pd.DataFrame([{c: r[c] for c in columns} for r in rows], columns=columns)
-        return table.sort_values(["track", "frame"], ignore_index=True)
-
-
-@dataclass
-class _LogState:
-    rng: np.random.RandomState
-    tracks: list = field(default_factory=list)
-    identity: dict = field(default_factory=dict)
-    alias: dict = field(default_factory=dict)  # a joined track's key -> the track it joined
-    pending: list = field(default_factory=list)
-    previous: _Frame | None = None
-    last_ego: tuple | None = None
-    n_frames: int = 0
-    next_key: int = 0
-    n_confirmed: int = 0
-
-    last_first: _Frame | None = None  # the last frame that was a pair's first sweep
-
-
-@dataclass
-class _Pair:
-    """What a step needs of the pair's fit."""
-
-    ego: np.ndarray  # 4 x 4, first sweep to second
-    scale: float  # the ego ICP's robust residual scale
-    ground: np.ndarray  # the first sweep's ground (valid rows)
-    detections: dict  # moving cluster -> (rows, 4 x 4 motion)
-
-
-class _Anything:
-    """Contains every name: the parameters of a ``fit(**kwargs)``."""
-
-    def __contains__(self, name):
-        return True
-
-
-def _fit_parameters(estimator):
-    """The keyword parameters of ``estimator.fit`` (everything, for ``**kwargs``)."""
-    parameters = inspect.signature(estimator.fit).parameters
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
-        return _Anything()
-    return set(parameters)
-
-
-def _mask(values, n):
-    return np.zeros(n, dtype=bool) if values is None else np.asarray(values, dtype=bool)
-
-
-def _sample(points, rng):
-    if len(points) <= _TRACK_POINTS:
-        return points
-    return points[rng.choice(len(points), _TRACK_POINTS, replace=False)]
-
-
-def _row(key, points, omega, velocity, frame, n_points):
-    """One row of the tracks' table: track ``key`` seen at ``frame`` (world ``points``)."""
-    centre = points.mean(axis=0)
-    length, width, height, yaw = _box(points)
-    return {
-        "key": key,
-        "frame": frame.index,
-        "time": frame.time,
-        "x": centre[0],
-        "y": centre[1],
-        "z": centre[2],
-        "length": length,
-        "width": width,
-        "height": height,
-        "yaw": yaw,
-        "vx": velocity[0],
-        "vy": velocity[1],
-        "vz": velocity[2],
-        "speed": float(np.linalg.norm(velocity)),
-        "yaw_rate": float(omega[2]),
-        "points": n_points,
-    }
+        return _MIN_ISLAND_SIZE
