@@ -19,6 +19,8 @@ from mmreg.sweeps._icp import multi_body_icp
 from mmreg.tracking._level_icp import level_icp, level_part
 from mmreg.tracking._motion import transform
 
+# Points of a claim's candidates on which its starts are judged and refined.
+_SAMPLE = 500
 # Starts refined by ICP, those with the most evidence.
 _REFINED_STARTS = 2
 # Evidence must exceed this many times the counter-evidence.
@@ -119,6 +121,13 @@ class Claim:
     motion: np.ndarray  # 4 x 4, refined on them
 
 
+def _thin(rows, size=_SAMPLE):
+    """At most ``size`` of ``rows``, evenly spread through them (no random draw)."""
+    if len(rows) <= size:
+        return rows
+    return rows[np.linspace(0, len(rows) - 1, size).astype(np.intp)]
+
+
 def track_claim(
     points,
     near,
@@ -154,13 +163,19 @@ def track_claim(
     if len(near) < min_evidence:
         return None
     sweep, tree, normals = target
+    # The starts are judged, and refined, on evenly spread samples of a large object's
+    # points (a car near a 64-beam sensor holds thousands); the winner on them all.
+    near_sample, tight_sample = _thin(near), _thin(tight)
+    share = len(near) / len(near_sample)
     seeds, motions, counts = [], [], []
     for start in starts:
-        evidence = near[claimed_points(points[near], start, ego, target, scale, view, margin)]
-        if len(evidence) < min_evidence:
+        claimed = claimed_points(points[near_sample], start, ego, target, scale, view, margin)
+        evidence = near_sample[claimed]
+        if share * len(evidence) < min_evidence:
             continue
-        ratio, _, _ = spacing_ratio(transform(start, points[tight]), tree, sweep, normals)
-        seeds.append(np.union1d(evidence, tight[ratio <= EXPLAINED_SPACINGS]))
+        moved = transform(start, points[tight_sample])
+        ratio, _, _ = spacing_ratio(moved, tree, sweep, normals)
+        seeds.append(np.union1d(evidence, tight_sample[ratio <= EXPLAINED_SPACINGS]))
         motions.append(start)
         counts.append(len(evidence))
     if not seeds:
