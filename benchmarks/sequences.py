@@ -229,6 +229,22 @@ def kiss_seconds(log):
     return float(np.mean(result.wall_s))
 
 
+def markdown(table):
+    """The table as markdown: 3 decimals, counts whole, "-" where a method has none."""
+
+    def cell(value, column):
+        if isinstance(value, str):
+            return value
+        if value is None or value != value:
+            return "-"
+        if column in ("tracks", "ID sw"):
+            return str(int(value))
+        return f"{value:.3f}"
+
+    shown = pd.DataFrame({c: [cell(v, c) for v in table[c]] for c in table.columns})
+    return shown.to_markdown(index=False, disable_numparse=True)
+
+
 # --------------------------------------------------------------------------- main
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -271,7 +287,7 @@ def main(argv=None):
     )
     Path(f"{args.out}.md").write_text(
         f"# Whole logs: tracks against pairs alone\n\n`{command.strip()}`\n\n{header}\n\n"
-        + table.to_markdown(index=False, floatfmt=".3f")
+        + markdown(table)
         + "\n"
     )
 
