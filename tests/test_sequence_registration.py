@@ -330,3 +330,21 @@ def test_each_frame_s_state_is_computed_once(monkeypatch):
     made = [key for key in calls if key[0] == "cKDTree" and key[1] in whole]
     # One tree of every frame that is some pair's second sweep, which the tracks share.
     assert len(made) == len(log.frames) - 1
+
+
+def test_thinned_to_voxels_every_point_takes_its_voxel_s_labels(street):
+    log, full = street
+    est = SequenceRegistration(random_state=0, voxel_size=0.1).fit(log.frames, times=log.times)
+    for k, points in enumerate(log.frames):
+        keys = np.floor(points / 0.1).astype(np.int64)
+        _, group = np.unique(keys, axis=0, return_inverse=True)
+        group = group.ravel()
+        labels = est.labels_[k]
+        # One label per voxel.
+        first = np.zeros(group.max() + 1, dtype=np.intp)
+        first[group[::-1]] = labels[::-1]
+        np.testing.assert_array_equal(labels, first[group])
+        assert est.flows_[k].shape == points.shape
+    # It finds what the full sweeps find: the same moving points, nearly.
+    agree = np.mean([np.mean(a == b) for a, b in zip(est.moving_, full.moving_, strict=True)])
+    assert agree > 0.98

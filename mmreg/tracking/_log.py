@@ -27,6 +27,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 from sklearn.utils import Bunch
 
+from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_rows
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS
 from mmreg.sweeps._ground import is_z_up_sweep
@@ -111,6 +112,7 @@ class LogFrame:
     up: np.ndarray | None = None  # the vertical, in a z-up LiDAR sweep
     seconds: bool = False  # whether ``time`` is in seconds (else the frame's index)
     point_times: np.ndarray | None = None  # capture times of the valid rows, seconds
+    covered: np.ndarray | None = None  # per row: its stand-in among the valid rows, -1 none
 
     @property
     def returns(self):
@@ -172,10 +174,25 @@ class LogTracker:
     min_points : int
         The pair estimator's smallest island: the most evidence a track needs.
     rng : numpy.random.RandomState
+    voxel_size : float or None
+        Register one point per voxel of this side (every point takes its voxel's labels);
+        None: every point.
     """
 
-    def __init__(self, make_pair, *, tau, lookahead, max_misses, frame_rate, min_points, rng):
+    def __init__(
+        self,
+        make_pair,
+        *,
+        tau,
+        lookahead,
+        max_misses,
+        frame_rate,
+        min_points,
+        rng,
+        voxel_size=None,
+    ):
         self._make_pair = make_pair
+        self.voxel_size = voxel_size
         self.tau = tau
         self.lookahead = lookahead
         self.max_misses = max_misses
@@ -197,7 +214,9 @@ class LogTracker:
         points = points[:, :3]
         valid = ~invalid_rows(np.hstack([points, points]))
         index = state.n_frames
-        frame = LogFrame(index, points, valid, self._time(index, time), given_pose=pose)
+        used, covered = self._voxels(points, valid)
+        frame = LogFrame(index, points, used, self._time(index, time), given_pose=pose)
+        frame.covered = covered
         if point_times is not None:
             point_times = np.asarray(point_times, dtype=float)
             if point_times.shape != (len(points),) or not np.all(np.isfinite(point_times)):
@@ -205,7 +224,7 @@ class LogTracker:
                     f"frame {index}: point_times must be {len(points)} finite numbers, "
                     "one per point."
                 )
-            frame.point_times = point_times[valid]
+            frame.point_times = point_times[used]
         frame.seconds = time is not None or self.frame_rate is not None
         if valid.sum() >= 3 and is_z_up_sweep(points[valid]):
             frame.up = np.array([0.0, 0.0, 1.0])
@@ -226,6 +245,26 @@ class LogTracker:
         ]
         state.pending = [f for f in state.pending if f.index > index - 1 - self.lookahead]
         return finished
+
+    def _voxels(self, points, valid):
+        """The rows a frame is registered on, and which of them stands for each row.
+
+        Without ``voxel_size``, every valid row. With it, the first valid row in each voxel
+        (KISS-ICP's thinning): ``used`` marks them and ``covered[i]`` is, for every valid
+        row ``i``, the place among the used rows of the one in its voxel (-1: invalid).
+        """
+        covered = np.full(len(points), -1, dtype=np.intp)
+        rows = np.flatnonzero(valid)
+        if self.voxel_size is None or not len(rows):
+            covered[rows] = np.arange(len(rows))
+            return valid, covered
+        keys = np.floor(points[rows] / self.voxel_size).astype(np.int64)
+        _, first, inverse = unique_rows(keys, return_index=True, return_inverse=True)
+        used = np.zeros(len(points), dtype=bool)
+        used[rows[first]] = True
+        place = np.cumsum(used) - 1  # each used row's place among the used rows
+        covered[rows] = place[rows[first]][inverse.ravel()]
+        return used, covered
 
     def close(self):
         """End the log: the results of every frame still pending, the last included."""
@@ -688,14 +727,17 @@ class LogTracker:
         valid_labels = np.where(own > 0, own, np.where(carried > 0, carried, valid_labels))
         if frame.body is not None:
             valid_labels[frame.body] = -1
+        # Every valid row takes what the row registered for it (itself, or its voxel's).
+        rows = frame.covered >= 0
+        stand_in = frame.covered[rows]
         labels = np.full(len(frame.points), -1, dtype=np.intp)
-        labels[frame.valid] = valid_labels
+        labels[rows] = valid_labels[stand_in]
         body = np.zeros(len(frame.points), dtype=bool)
         if frame.body is not None:
-            body[frame.valid] = frame.body
+            body[rows] = frame.body[stand_in]
         flow = np.full((len(frame.points), 3), np.nan)
         if after is not None:
-            flow[frame.valid] = self._flow(frame, after, own, carried)
+            flow[rows] = self._flow(frame, after, own, carried)[stand_in]
         # One row per track: pieces joined later keep the row with the most points.
         best = {}
         for r in frame.rows:
@@ -710,7 +752,7 @@ class LogTracker:
             moving=labels > 0,
             flow=flow,
             body=body,
-            valid=frame.valid.copy(),
+            valid=rows,
             pose=frame.pose,
             tracks=self._table(rows),
         )
