@@ -325,3 +325,29 @@ def test_a_log_of_a_folder_that_cannot_be_read_fails_alone(tmp_path, scheduler, 
     assert summary["status"].tolist() == ["done", "error"]
     assert "no .bin scans" in summary.loc[1, "error"]
     assert (out / "00" / "log.json").is_file() and not (out / "01").exists()
+
+
+def test_run_voxel_size_thins_the_frames(tmp_path):
+    """--voxel-size: the fit registers one point per voxel; every point is labelled."""
+    from mmreg.cli import main
+    from mmreg.datasets import make_lidar_sequence
+    from mmreg.io import read_semantickitti_labels
+
+    log = make_lidar_sequence(3, frame_rate=10.0, n_azimuths=256, random_state=0)
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k, points in enumerate(log.frames):
+        np.save(folder / f"scan{k}.npy", points)
+    out = tmp_path / "out"
+    assert main(["run", str(folder), "--out", str(out), "--voxel-size", "0.1", "-q"]) == 0
+    for k, points in enumerate(log.frames):
+        labels = read_semantickitti_labels(out / "labels" / f"scan{k}.label", len(points))
+        keys = np.floor(points / 0.1).astype(np.int64)
+        _, group = np.unique(keys, axis=0, return_inverse=True)
+        group = group.ravel()
+        # one label per voxel
+        first = np.zeros(group.max() + 1, dtype=np.int64)
+        first[group[::-1]] = labels.semantic[::-1]
+        np.testing.assert_array_equal(labels.semantic, first[group])
+    with pytest.raises(SystemExit):
+        main(["run", str(folder), "--out", str(tmp_path / "bad"), "--voxel-size", "0"])

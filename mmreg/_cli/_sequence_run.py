@@ -94,7 +94,8 @@ def remove_results(out):
 def _estimator(args):
     """The sequence estimator of the options; its own pair estimator unless they ask for
     another (--method, --max-iter, --tau, --ground)."""
-    from mmreg import MultiModelRegistration, SequenceRegistration, SweepRegistration
+    from mmreg import MultiModelRegistration, SequenceRegistration
+    from mmreg.estimators._sequence import default_pair_estimator
 
     pair = None
     inner = args.method != "sweep" or args.max_iter != 10 or args.tau != 5.0
@@ -104,9 +105,16 @@ def _estimator(args):
             estimator = MultiModelRegistration(
                 variant=args.method, tau=args.tau, max_iter=args.max_iter, random_state=args.seed
             )
-        pair = SweepRegistration(estimator, ground=args.ground, random_state=args.seed)
+        # Seeded by the sequence, a new seed for every pair.
+        pair = default_pair_estimator(estimator=estimator, ground=args.ground)
     tau = 5.0 if args.tau is None else args.tau
-    return SequenceRegistration(pair, tau=tau, frame_rate=args.frame_rate, random_state=args.seed)
+    return SequenceRegistration(
+        pair,
+        tau=tau,
+        frame_rate=args.frame_rate,
+        voxel_size=getattr(args, "voxel_size", None),
+        random_state=args.seed,
+    )
 
 
 def _configuration(args):
@@ -124,6 +132,7 @@ def _configuration(args):
         "max_iter": args.max_iter,
         "seed": args.seed,
         "frame_rate": args.frame_rate,
+        "voxel_size": getattr(args, "voxel_size", None),
         "poses": args.poses,
         "mmreg": __version__,
     }

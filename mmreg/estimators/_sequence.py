@@ -275,9 +275,7 @@ class SequenceRegistration(BaseEstimator):
         """A fresh pair estimator; one whose ``random_state`` is None is seeded with
         ``seed`` (a new one for every pair, drawn from ours)."""
         if self.pair_estimator is None:
-            from mmreg.estimators._two_sweeps import SweepRegistration
-
-            return SweepRegistration(max_icp_iter=_PAIR_ICP_ITER, random_state=seed)
+            return default_pair_estimator(random_state=seed)
         estimator = clone(self.pair_estimator)
         if estimator.get_params(deep=False).get("random_state", 0) is None:
             estimator.set_params(random_state=seed)
@@ -291,3 +289,11 @@ class SequenceRegistration(BaseEstimator):
             if isinstance(value, Integral):
                 return int(value)
         return _MIN_ISLAND_SIZE
+
+
+def default_pair_estimator(**params):
+    """The pair estimator a log's pairs get by default: ``SweepRegistration`` with 15 ICP
+    steps (see ``pair_estimator``) and ``params``."""
+    from mmreg.estimators._two_sweeps import SweepRegistration
+
+    return SweepRegistration(**{"max_icp_iter": _PAIR_ICP_ITER, **params})
