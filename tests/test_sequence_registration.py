@@ -348,3 +348,18 @@ def test_thinned_to_voxels_every_point_takes_its_voxel_s_labels(street):
     # It finds what the full sweeps find: the same moving points, nearly.
     agree = np.mean([np.mean(a == b) for a, b in zip(est.moving_, full.moving_, strict=True)])
     assert agree > 0.98
+
+
+def test_a_frame_too_sparse_to_register_is_a_gap_with_a_warning(street):
+    log, batch = street
+    frames = list(log.frames)
+    frames[3] = frames[3][:5]  # an almost empty message
+    with pytest.warns(UserWarning, match="frame 3: fewer than 10 valid points"):
+        est = SequenceRegistration(random_state=0).fit(frames, times=log.times)
+    assert [len(labels) for labels in est.labels_] == [len(f) for f in frames]
+    # The frames before the gap are as without it; the odometry goes on across it.
+    for k in (0, 1):
+        np.testing.assert_array_equal(est.labels_[k], batch.labels_[k])
+    truth = np.linalg.inv(log.poses[5]) @ log.poses[4]
+    found = np.linalg.inv(est.ego_poses_[5]) @ est.ego_poses_[4]
+    assert np.linalg.norm(truth[:3, 3] - found[:3, 3]) < 0.05

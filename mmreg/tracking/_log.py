@@ -29,6 +29,7 @@ from sklearn.utils import Bunch
 
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_rows
+from mmreg._warnings import warn
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -74,6 +75,8 @@ _BODY_MATCH = 0.01
 _PIECES = 0.2
 _ALIKE = 0.1
 _ALIKE_NOISE = 0.01
+# A sweep with fewer valid points is not registered (SweepRegistration needs 10).
+_FEWEST_POINTS = 10
 # The least evidence a track's motion needs, in points (a quarter of a small object's).
 _MIN_EVIDENCE = 4
 # A place is hidden from a sweep behind a return this much nearer (share of tau).
@@ -295,6 +298,9 @@ class LogTracker:
         state = self._state
         state.last_first = previous
         dt = frame.time - previous.time
+        if min(len(previous.returns), len(frame.returns)) < _FEWEST_POINTS:
+            self._gap(previous, frame, dt)
+            return
         pair = self._fit_pair(previous, frame, dt)
         first = previous.returns
         predictions = self._predict(previous.time, previous.pose)
@@ -336,6 +342,30 @@ class LogTracker:
         for track in self._confirm_and_end(previous, seen):
             self._extend_back(track, previous)
         self._carry(previous, frame)
+
+    def _gap(self, previous, frame, dt):
+        """A pair with a sweep too sparse to register (an empty message, a dropped
+        frame): the ego motion is predicted (constant velocity, else none), nothing is
+        labelled but by the tracks carried, and the tracks coast."""
+        warn(
+            f"frame {frame.index if len(previous.returns) >= _FEWEST_POINTS else previous.index}"
+            f": fewer than {_FEWEST_POINTS} valid points; the pair of frames "
+            f"{previous.index} and {frame.index} is not registered."
+        )
+        start = self._ego_start(previous, frame)
+        ego = np.eye(4) if start is None else start
+        previous.ego = ego
+        frame.pose = compose(previous.pose, inverse(ego))
+        n = len(previous.returns)
+        previous.pair_labels = np.zeros(n, dtype=np.intp)
+        previous.pair_flow = transform(ego, previous.returns) - previous.returns
+        previous.body = np.zeros(n, dtype=bool) if previous.body is None else previous.body
+        previous.ground = np.zeros(n, dtype=bool)
+        previous.scale = 0.002 * self.tau
+        previous.track_of = np.full(n, -1, dtype=np.intp)
+        frame.body = np.zeros(len(frame.returns), dtype=bool)
+        self._confirm_and_end(previous, {})
+        frame.carried = np.full(len(frame.returns), -1, dtype=np.intp)
 
     def _join_pieces(self, previous, seen, dt):
         """Tracks seen on pieces within a fifth of tau of each other that move alike (their
