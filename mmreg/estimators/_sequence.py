@@ -97,6 +97,31 @@ class SequenceRegistration(BaseEstimator):
     n_frames_ : int
     n_tracks_ : int
         Confirmed tracks.
+
+    See Also
+    --------
+    mmreg.SweepRegistration : The pair estimator.
+    mmreg.metrics.moving_iou, mmreg.metrics.tracking_scores : What to score a log with.
+
+    Notes
+    -----
+    The steps of a frame are described in ``docs/algorithm.md`` ("A whole log"). Each
+    frame costs about one pair of :class:`~mmreg.SweepRegistration` (the tracks add a
+    tenth); memory is the tracks and ``lookahead + 2`` frames.
+
+    Examples
+    --------
+    Five frames of a generated street at 10 Hz with cars at 8 m/s; one is seen moving
+    in every frame:
+
+    >>> from mmreg import SequenceRegistration
+    >>> from mmreg.datasets import make_lidar_sequence
+    >>> log = make_lidar_sequence(5, n_moving=2, n_braking=0, n_overtaking=0, n_walkers=0,
+    ...                           n_cyclists=0, n_standing=0, car_speed=8.0, n_azimuths=512,
+    ...                           random_state=1)
+    >>> est = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+    >>> est.n_tracks_, round(float(est.tracks_["speed"].median()))
+    (1, 8)
     """
 
     _parameter_constraints: dict = {
