@@ -18,10 +18,23 @@ what a road user did in the interval. Vehicles and people are bounded:
 
 Every length is in the points' units; ``scale`` (the estimator's ``tau``, 5 for metres)
 turns the physical constants into them: :data:`MAX_SPEED` and :data:`PERSON_LENGTH` are
-multiplied by ``scale / 5``. A cluster that breaks a bound has no admissible motion of
-its own: each of its points rejoins the static world where the static world's motion
-explains it (it lands on the second sweep, :func:`mmreg.sweeps._explained.unexplained_mask`),
-and becomes an outlier where it does not (no motion a road user can make explains it).
+multiplied by ``scale / 5``.
+
+A free fit can break a bound on a real mover: the partial view of a car (an L of a few
+dozen points) matches the car of the second sweep turned by 60-150 degrees about as well
+as unturned, and its centroid then lands metres off. So a cluster that breaks the speed,
+reach or turn bound in a z-up sweep is fitted once more as a road user moves: a level
+shift (no turn; the static world's rotation and height) by a point-to-plane ICP started
+where its motion takes its centroid along the ground (:func:`level_shift`). It keeps
+that motion where the motion breaks no bound, most of its points show that it moved so
+(the shift explains them on the second sweep and the static world's motion does not,
+less twice those that only the static world's explains: a still patch's noise explains
+a few either way), and the shift explains more of them than the broken motion did (the
+free fit went astray; a cluster that really moves so is explained better by its own
+fit). Else it has no admissible motion: each of its points rejoins the static world
+where the static world's motion explains it (it lands on the second sweep,
+:func:`mmreg.sweeps._explained.unexplained_mask`), and becomes an outlier where it does
+not (no motion a road user can make explains it).
 """
 
 import numpy as np
@@ -38,6 +51,7 @@ __all__ = [
     "VEHICLE_TURN_RATE",
     "bound_motions",
     "impossible_motions",
+    "level_shift",
     "object_motions",
 ]
 
@@ -54,6 +68,20 @@ PERSON_LENGTH = 1.2
 _METRE_TAU = 5.0
 # A sheet is level within this angle (its normal within it of the vertical).
 _LEVEL_DEG = 30.0
+# The level shift's ICP: its gate in units of tau (the estimator's default gate, a fifth
+# of tau: 1 m), its steps, and its robust kernel (Tukey's biweight, zero beyond this many
+# robust scales; the scale starts at the gate's and shrinks by _ANNEAL a step, as
+# mmreg.sweeps._icp anneals it).
+_SHIFT_GATE = 0.2
+_SHIFT_STEPS = 30
+_KERNEL = 2.0
+_ANNEAL = 0.7
+_MAD_TO_SIGMA = 1.4826
+# Fewest matches of a level shift's step (two unknowns, and a margin).
+_MIN_MATCHES = 8
+# A re-fitted cluster's counter-evidence (points the static world explains and its shift
+# does not) weighs this many times its evidence, as a track's does.
+_AGAINST = 2
 
 
 def object_motions(points, labels, motions, static):
@@ -221,15 +249,180 @@ def impossible_motions(points, labels, motions, static, *, scale, reach, interva
     return impossible, [r if impossible[k] else "" for k, r in enumerate(reasons)]
 
 
-def bound_motions(points, labels, motions, static, target, sigma, **bounds):
-    """The clusters whose motion no road user can make, taken apart.
+def level_shift(points, start, static_motion, target, *, max_distance, up, max_iter=_SHIFT_STEPS):
+    """A cluster's level shift by robust point-to-plane ICP: no turn, no climb.
 
-    Each point of such a cluster rejoins the static world where the static world's
-    motion explains it on the second sweep (``target``: the sweep, its cKDTree and its
-    SurfaceNormals; ``sigma``: the ego ICP's robust residual scale; see
+    The points move by ``x + s`` (``s`` across ``up``, in the first sweep's frame), then
+    by the static world's motion into the second sweep's frame, where the cost is read:
+    the motion a road user makes at its simplest, driving on along the ground.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+        The cluster's points in the first sweep.
+    start : ndarray of shape (3,)
+        The shift to start from (its part along ``up`` is dropped).
+    static_motion : tuple (R, t)
+        The static world's motion, first sweep to second.
+    target : tuple
+        ``(sweep, tree, normals)`` of the second sweep.
+    max_distance : float
+        A point farther than this from the second sweep is not matched.
+    up : ndarray of shape (3,)
+        The vertical (unit) in the first sweep's frame.
+    max_iter : int
+        Largest number of Gauss-Newton steps.
+
+    Returns
+    -------
+    shift : ndarray of shape (3,)
+    scale : float
+        The robust residual scale of the last step (NaN when too few points matched
+        at the start).
+
+    Examples
+    --------
+    A box seen again 1.5 m on along x, started 0.6 m beyond and 0.8 m up:
+
+    >>> import numpy as np
+    >>> from scipy.spatial import cKDTree
+    >>> from mmreg.sweeps._icp import SurfaceNormals
+    >>> from mmreg.sweeps._motion_bounds import level_shift
+    >>> rng = np.random.default_rng(0)
+    >>> def box(n):
+    ...     p = rng.uniform(-1, 1, (n, 3)) * [2.0, 1.0, 0.7]
+    ...     side = rng.integers(0, 3, n)
+    ...     p[np.arange(n), side] = np.sign(rng.uniform(-1, 1, n)) * np.array([2.0, 1.0, 0.7])[side]
+    ...     return p
+    >>> sweep = box(20000) + [1.5, 0.0, 0.0]
+    >>> tree = cKDTree(sweep)
+    >>> target = (sweep, tree, SurfaceNormals(sweep, tree, 10))
+    >>> shift, _ = level_shift(box(2000), np.array([2.1, 0.0, 0.8]), (np.eye(3), np.zeros(3)),
+    ...                        target, max_distance=1.0, up=np.array([0.0, 0.0, 1.0]))
+    >>> np.round(shift, 2) + 0.0
+    array([1.5, 0. , 0. ])
+    """
+    sweep, tree, normals = target
+    rotation, translation = static_motion
+    across = np.eye(3) - np.outer(up, up)
+    shift = across @ np.asarray(start, dtype=float)
+    scale, robust = None, np.nan
+    for _ in range(max_iter):
+        landed = (points + shift) @ rotation.T + translation
+        distance, nearest = tree.query(landed, distance_upper_bound=max_distance)
+        matched = np.flatnonzero(np.isfinite(distance))
+        if len(matched) < _MIN_MATCHES:
+            break
+        normal, _, flatness = normals(nearest[matched])
+        usable = np.isfinite(flatness) & (flatness >= 0.2)
+        if usable.sum() < _MIN_MATCHES:
+            break
+        rows, normal = matched[usable], normal[usable]
+        residual = np.einsum("ni,ni->n", normal, landed[rows] - sweep[nearest[rows]])
+        # The kernel starts as wide as the gate and narrows to the robust scale: a
+        # narrow one at the start would drop the points that show how far it moved.
+        robust = max(_MAD_TO_SIGMA * float(np.median(np.abs(residual))), 1e-12 * max_distance)
+        scale = max(robust, _ANNEAL * (max_distance / _KERNEL if scale is None else scale))
+        u = residual / (_KERNEL * scale)
+        weight = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
+        jacobian = normal @ rotation @ across  # the residual's change per shift
+        hessian = jacobian.T @ (jacobian * weight[:, None])
+        values, vectors = np.linalg.eigh(hessian)
+        # Directions the surfaces do not constrain (along a wall; up) stay put.
+        keep = values > 1e-3 * max(values.max(), np.finfo(float).tiny)
+        if not keep.any():
+            break
+        gradient = jacobian.T @ (weight * residual)
+        step = -vectors[:, keep] @ ((vectors[:, keep].T @ gradient) / values[keep])
+        shift = shift + step
+        if np.linalg.norm(step) < 1e-4 * max_distance:
+            break
+    return shift, robust
+
+
+def _explained(points, labels, clusters, motions, target, sigma):
+    """Whether the second sweep explains each point of ``clusters`` (their rows in order,
+    cluster by cluster) where the cluster's motion puts it (``motions``: rotations and
+    translations, one row per cluster of ``clusters``)."""
+    sweep, tree, normals = target
+    rows = [np.flatnonzero(labels == k) for k in clusters]
+    moved = np.vstack(
+        [points[r] @ R.T + t for r, R, t in zip(rows, motions[0], motions[1], strict=True)]
+    )
+    unexplained, _ = unexplained_mask(moved, tree, sweep, normals, sigma)
+    return ~unexplained
+
+
+def _refit_level(points, labels, motions, static, target, sigma, impossible, reasons, bounds):
+    """The clusters of ``impossible`` (but sheets) that a level shift explains instead.
+
+    Returns the clusters re-fitted, their rotations, translations and robust scales.
+    """
+    up = bounds.get("up")
+    clusters = [k for k in np.flatnonzero(impossible) if reasons[k] != "sheet"]
+    if up is None or not clusters:
+        return [], None, None, None
+    rotations, translations = (np.asarray(m, dtype=float) for m in motions[:2])
+    world = (rotations[static], translations[static])
+    displacement, _ = object_motions(points, labels, (rotations, translations), static)
+    gate = _SHIFT_GATE * bounds["scale"]
+    shifts, scales = [], []
+    for k in clusters:
+        # Where its motion takes its centroid, in the first sweep's frame, along the ground.
+        start = world[0].T @ displacement[k]
+        shift, scale = level_shift(
+            points[labels == k], start, world, target, max_distance=gate, up=up
+        )
+        shifts.append(shift)
+        scales.append(scale)
+    shifts = np.array(shifts)
+    level = (
+        np.broadcast_to(world[0], (len(clusters), 3, 3)),
+        shifts @ world[0].T + world[1],
+    )
+    tried_r, tried_t = rotations.copy(), translations.copy()
+    tried_r[clusters], tried_t[clusters] = level
+    still, _ = impossible_motions(points, labels, (tried_r, tried_t), static, **bounds)
+    counts = np.bincount(labels[labels >= 0], minlength=len(rotations))[clusters]
+    owner = np.repeat(np.arange(len(clusters)), counts)
+    broken = (rotations[clusters], translations[clusters])
+    at_rest = (level[0], np.broadcast_to(world[1], (len(clusters), 3)))
+    by_shift = _explained(points, labels, clusters, level, target, sigma)
+    by_broken = _explained(points, labels, clusters, broken, target, sigma)
+    by_static = _explained(points, labels, clusters, at_rest, target, sigma)
+    # Most of its points show that it moved as a road user does: the shift explains them
+    # and the static world does not, less twice those the static world explains and the
+    # shift does not (as a track's evidence is counted, mmreg.tracking: a still patch's
+    # noise explains a few points either way; a mover's evidence has no counterweight) ...
+    moved = np.bincount(owner, weights=by_shift & ~by_static, minlength=len(clusters))
+    against = np.bincount(owner, weights=by_static & ~by_shift, minlength=len(clusters))
+    # ... and the shift explains more of them than its own fit did.
+    better = np.bincount(owner, weights=by_shift.astype(float) - by_broken, minlength=len(clusters))
+    keep = ~still[clusters] & (2 * (moved - _AGAINST * against) > counts) & (better > 0)
+    chosen = np.flatnonzero(keep)
+    return (
+        [clusters[i] for i in chosen],
+        level[0][chosen],
+        level[1][chosen],
+        np.asarray(scales)[chosen],
+    )
+
+
+def bound_motions(points, labels, motions, static, target, sigma, **bounds):
+    """The clusters whose motion no road user can make, re-fitted or taken apart.
+
+    A cluster that breaks the speed, reach or turn bound in a z-up sweep (``up`` given)
+    keeps the level shift of :func:`level_shift` instead where that breaks no bound,
+    explains most of its points where the static world's motion does not (less twice
+    those that only the static world's explains), and explains
+    more of them than its own motion did (a partial view fitted turned: a real mover);
+    its robust scale (``motions``' third array) becomes the shift's. Every other cluster
+    that breaks a bound is taken apart: each of its points rejoins the static world where
+    the static world's motion explains it on the second sweep (``target``: the sweep, its
+    cKDTree and its SurfaceNormals; ``sigma``: the ego ICP's robust residual scale; see
     :func:`mmreg.sweeps._explained.unexplained_mask`), and becomes an outlier (-1) where
-    it does not. ``motions``: per-cluster arrays, rotations and translations first;
-    ``bounds``: the keywords of :func:`impossible_motions`.
+    it does not. ``motions``: per-cluster arrays, rotations, translations and the ICP's
+    robust scales first; ``bounds``: the keywords of :func:`impossible_motions`.
 
     Returns the labels, the arrays without the clusters taken apart, the static world's
     new index, and the reasons of those taken apart (a list, one per such cluster).
@@ -240,6 +433,17 @@ def bound_motions(points, labels, motions, static, target, sigma, **bounds):
     if not impossible.any():
         return labels, motions, static, []
     labels = np.asarray(labels).copy()
+    refitted, rotations, translations, scales = _refit_level(
+        points, labels, motions, static, target, sigma, impossible, reasons, bounds
+    )
+    if refitted:
+        motions = tuple(np.array(values, copy=True) for values in motions)
+        motions[0][refitted], motions[1][refitted] = rotations, translations
+        if len(motions) > 2:
+            motions[2][refitted] = scales
+        impossible[refitted] = False
+        if not impossible.any():
+            return labels, motions, static, []
     rows = np.flatnonzero((labels >= 0) & impossible[np.maximum(labels, 0)])
     rotation, translation = motions[0][static], motions[1][static]
     sweep, tree, normals = target
