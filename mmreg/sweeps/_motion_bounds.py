@@ -43,6 +43,7 @@ from mmreg._array.geometry import departures
 from mmreg._array.moments import group_moments
 from mmreg.sweeps._ambiguous_shapes import ACROSS, shapes
 from mmreg.sweeps._explained import unexplained_mask
+from mmreg.sweeps._level_icp import level_icp
 
 __all__ = [
     "MAX_SPEED",
@@ -68,17 +69,10 @@ PERSON_LENGTH = 1.2
 _METRE_TAU = 5.0
 # A sheet is level within this angle (its normal within it of the vertical).
 _LEVEL_DEG = 30.0
-# The level shift's ICP: its gate in units of tau (the estimator's default gate, a fifth
-# of tau: 1 m), its steps, and its robust kernel (Tukey's biweight, zero beyond this many
-# robust scales; the scale starts at the gate's and shrinks by _ANNEAL a step, as
-# mmreg.sweeps._icp anneals it).
+# The level shift's ICP (mmreg.sweeps._level_icp without the turn): its gate in units of
+# tau (the estimator's default gate, a fifth of tau: 1 m) and its steps.
 _SHIFT_GATE = 0.2
 _SHIFT_STEPS = 30
-_KERNEL = 2.0
-_ANNEAL = 0.7
-_MAD_TO_SIGMA = 1.4826
-# Fewest matches of a level shift's step (two unknowns, and a margin).
-_MIN_MATCHES = 8
 # A re-fitted cluster's counter-evidence (points the static world explains and its shift
 # does not) weighs this many times its evidence, as a track's does.
 _AGAINST = 2
@@ -302,42 +296,25 @@ def level_shift(points, start, static_motion, target, *, max_distance, up, max_i
     >>> np.round(shift, 2) + 0.0
     array([1.5, 0. , 0. ])
     """
-    sweep, tree, normals = target
     rotation, translation = static_motion
-    across = np.eye(3) - np.outer(up, up)
-    shift = across @ np.asarray(start, dtype=float)
-    scale, robust = None, np.nan
-    for _ in range(max_iter):
-        landed = (points + shift) @ rotation.T + translation
-        distance, nearest = tree.query(landed, distance_upper_bound=max_distance)
-        matched = np.flatnonzero(np.isfinite(distance))
-        if len(matched) < _MIN_MATCHES:
-            break
-        normal, _, flatness = normals(nearest[matched])
-        usable = np.isfinite(flatness) & (flatness >= 0.2)
-        if usable.sum() < _MIN_MATCHES:
-            break
-        rows, normal = matched[usable], normal[usable]
-        residual = np.einsum("ni,ni->n", normal, landed[rows] - sweep[nearest[rows]])
-        # The kernel starts as wide as the gate and narrows to the robust scale: a
-        # narrow one at the start would drop the points that show how far it moved.
-        robust = max(_MAD_TO_SIGMA * float(np.median(np.abs(residual))), 1e-12 * max_distance)
-        scale = max(robust, _ANNEAL * (max_distance / _KERNEL if scale is None else scale))
-        u = residual / (_KERNEL * scale)
-        weight = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
-        jacobian = normal @ rotation @ across  # the residual's change per shift
-        hessian = jacobian.T @ (jacobian * weight[:, None])
-        values, vectors = np.linalg.eigh(hessian)
-        # Directions the surfaces do not constrain (along a wall; up) stay put.
-        keep = values > 1e-3 * max(values.max(), np.finfo(float).tiny)
-        if not keep.any():
-            break
-        gradient = jacobian.T @ (weight * residual)
-        step = -vectors[:, keep] @ ((vectors[:, keep].T @ gradient) / values[keep])
-        shift = shift + step
-        if np.linalg.norm(step) < 1e-4 * max_distance:
-            break
-    return shift, robust
+    up = np.asarray(up, dtype=float)
+    start_motion = np.eye(4)
+    start_motion[:3, 3] = np.asarray(start, dtype=float) - up * (np.asarray(start) @ up)
+    ego = np.eye(4)
+    ego[:3, :3], ego[:3, 3] = rotation, translation
+    fit = level_icp(
+        points,
+        start_motion,
+        ego,
+        target,
+        max_distance=max_distance,
+        max_iter=max_iter,
+        up=up,
+        turn=False,
+    )
+    # The shift: the level motion's translation (it does not turn).
+    shift = rotation.T @ (fit.motion[:3, 3] - translation)
+    return shift, fit.scale
 
 
 def _explained(points, labels, clusters, motions, target, sigma):

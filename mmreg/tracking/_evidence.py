@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_mask
 from mmreg.sweeps._icp import multi_body_icp
-from mmreg.tracking._level_icp import level_icp, level_part
+from mmreg.sweeps._level_icp import level_icp, level_part
 from mmreg.tracking._motion import transform
 
 # Points of a claim's candidates on which its starts are judged and refined.
@@ -155,7 +155,7 @@ def track_claim(
     with the most evidence wins, if it has ``min_evidence`` points and moves them more
     than two of the second sweep's spacings from where the ego motion puts them (a car
     that stopped does not). ``up``: the vertical of z-up sweeps, along which a road
-    user's motion is kept level (:mod:`mmreg.tracking._level_icp`); None: free.
+    user's motion is kept level (:mod:`mmreg.sweeps._level_icp`); None: free.
     ``view`` and ``margin``: the second sweep's range image; points it could not have
     seen are no evidence either way (see :func:`claimed_points`). Returns a
     :class:`Claim` or None.
@@ -194,7 +194,7 @@ def track_claim(
                 target,
                 max_distance=max_distance,
                 up=up,
-            )
+            ).motion
             for rows, start in zip(seeds, motions, strict=True)
         ]
     else:

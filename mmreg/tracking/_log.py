@@ -33,9 +33,9 @@ from mmreg._warnings import warn
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
+from mmreg.sweeps._level_icp import level_icp, level_part
 from mmreg.sweeps._motion_bounds import impossible_motions
 from mmreg.tracking._evidence import near_points, track_claim
-from mmreg.tracking._level_icp import level_icp, level_part
 from mmreg.tracking._motion import (
     compose,
     inverse,
@@ -598,7 +598,7 @@ class LogTracker:
         """A tentative track for a moving cluster no track holds.
 
         In z-up sweeps its motion is fitted again, level (a turn about the vertical and
-        a shift, :mod:`mmreg.tracking._level_icp`), from the cluster's: a far car's few
+        a shift, :mod:`mmreg.sweeps._level_icp`), from the cluster's: a far car's few
         points fit a free motion that tilts it by tens of degrees.
         """
         state = self._state
@@ -612,7 +612,7 @@ class LogTracker:
                 frame.target(),
                 max_distance=0.2 * self.tau,
                 up=previous.up,
-            )
+            ).motion
         world = compose(frame.pose, motion, inverse(previous.pose))
         points = transform(previous.pose, previous.returns[rows])
         omega, velocity = twist_of(world, points.mean(axis=0), dt)

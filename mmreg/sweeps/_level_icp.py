@@ -14,9 +14,11 @@ move by ``W`` (level, in the first sweep's frame), then by the ego motion ``E`` 
 second sweep's frame, where the robust point-to-plane cost is read.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ["level_icp", "level_part"]
+__all__ = ["LevelFit", "level_icp", "level_part"]
 
 _MAD_TO_SIGMA = 1.4826
 _KERNEL = 2.0  # Tukey's biweight is zero beyond this many robust scales
@@ -28,6 +30,13 @@ def _turn(angle, up):
     """Rotation by ``angle`` about the unit vector ``up`` (Rodrigues)."""
     cross = np.array([[0.0, -up[2], up[1]], [up[2], 0.0, -up[0]], [-up[1], up[0], 0.0]])
     return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
+
+
+class LevelFit(NamedTuple):
+    """What :func:`level_icp` returns."""
+
+    motion: np.ndarray  # 4 x 4, ``ego @ W``: first sweep's frame to the second's
+    scale: float  # the robust residual scale of the last step (NaN: too few matches)
 
 
 def _across(up):
@@ -62,7 +71,16 @@ def level_part(motion, ego, centre, up=(0.0, 0.0, 1.0)):
 
 
 def level_icp(
-    a, start, ego, target, *, max_distance, max_iter=20, up=(0.0, 0.0, 1.0), min_scale=1e-6
+    a,
+    start,
+    ego,
+    target,
+    *,
+    max_distance,
+    max_iter=20,
+    up=(0.0, 0.0, 1.0),
+    turn=True,
+    min_scale=1e-12,
 ):
     """Refine a level motion of the points ``a`` on the second sweep.
 
@@ -81,11 +99,18 @@ def level_icp(
         Points farther than this from the second sweep are not matched.
     up : array-like of shape (3,)
         The vertical in the first sweep's frame.
+    turn : bool, default=True
+        Whether the motion may turn about ``up``; False: a shift alone (the simplest
+        motion of a road user, driving on).
+    min_scale : float, default=1e-12
+        Floor of the robust residual scale, in units of ``max_distance``.
 
     Returns
     -------
-    motion : ndarray of shape (4, 4)
-        ``ego @ W``: the object's motion from the first sweep's frame to the second's.
+    fit : LevelFit
+        ``motion`` (4, 4), ``ego @ W``: the object's motion from the first sweep's frame
+        to the second's; ``scale``, the robust residual scale of the last step (NaN when
+        too few points matched at the start).
 
     Examples
     --------
@@ -95,7 +120,7 @@ def level_icp(
     >>> import numpy as np
     >>> from scipy.spatial import cKDTree
     >>> from mmreg.sweeps._icp import SurfaceNormals
-    >>> from mmreg.tracking._level_icp import level_icp
+    >>> from mmreg.sweeps._level_icp import level_icp
     >>> rng = np.random.default_rng(0)
     >>> def box(n):
     ...     p = rng.uniform(-1, 1, (n, 3)) * [2.0, 1.0, 0.7]
@@ -107,7 +132,7 @@ def level_icp(
     >>> sweep = box(20000) @ turn.T + [0.4, 0.1, 0.0]
     >>> tree = cKDTree(sweep)
     >>> target = (sweep, tree, SurfaceNormals(sweep, tree, 10))
-    >>> motion = level_icp(box(2000), np.eye(4), np.eye(4), target, max_distance=1.0)
+    >>> motion = level_icp(box(2000), np.eye(4), np.eye(4), target, max_distance=1.0).motion
     >>> yaw = np.degrees(np.arctan2(motion[1, 0], motion[0, 0]))
     >>> np.round(motion[:3, 3], 2) + 0.0, round(float(yaw), 1)
     (array([0.4, 0.1, 0. ]), 5.0)
@@ -117,7 +142,7 @@ def level_icp(
     across = _across(up)
     level = np.array(start, dtype=float)
     rotation_e, translation_e = ego[:3, :3], ego[:3, 3]
-    scale = None
+    scale, robust = None, np.nan
     for _ in range(max_iter):
         moved = a @ level[:3, :3].T + level[:3, 3]  # in the first sweep's frame
         landed = moved @ rotation_e.T + translation_e
@@ -135,7 +160,7 @@ def level_icp(
         # The kernel starts as wide as the reach and narrows to the robust scale (as
         # mmreg.sweeps._icp anneals it): a narrow kernel at the start would drop the very
         # points that show how far the object moved.
-        robust = max(_MAD_TO_SIGMA * np.median(np.abs(residual)), min_scale)
+        robust = max(_MAD_TO_SIGMA * float(np.median(np.abs(residual))), min_scale * max_distance)
         scale = max_distance / _KERNEL if scale is None else scale
         scale = max(robust, _ANNEAL * scale)
         u = residual / (_KERNEL * scale)
@@ -149,20 +174,25 @@ def level_icp(
         centre = moved[rows].mean(axis=0)
         n_first = n @ rotation_e  # the normals in the first sweep's frame
         arm = np.cross(up, moved[rows] - centre)
-        jacobian = np.column_stack([np.einsum("ni,ni->n", n_first, arm), n_first @ across.T])
+        shifts = n_first @ across.T
+        if turn:
+            jacobian = np.column_stack([np.einsum("ni,ni->n", n_first, arm), shifts])
+        else:
+            jacobian = shifts
         hessian = jacobian.T @ (jacobian * weight[:, None])
         gradient = jacobian.T @ (weight * residual)
         # Directions the surfaces do not constrain (a wall's along itself) stay put.
         values, vectors = np.linalg.eigh(hessian)
         keep = values > 1e-3 * max(values.max(), np.finfo(float).tiny)
         step = -vectors[:, keep] @ ((vectors[:, keep].T @ gradient) / values[keep])
-        turn = _turn(step[0], up)
+        angle, shift = (step[0], step[1:]) if turn else (0.0, step)
+        rotation = _turn(angle, up)
         update = np.eye(4)
-        update[:3, :3] = turn
-        update[:3, 3] = centre + step[1:] @ across - turn @ centre
+        update[:3, :3] = rotation
+        update[:3, 3] = centre + shift @ across - rotation @ centre
         level = update @ level
-        if np.linalg.norm(step[1:]) + abs(step[0]) * np.linalg.norm(arm, axis=1).max() < (
+        if np.linalg.norm(shift) + abs(angle) * np.linalg.norm(arm, axis=1).max() < (
             1e-4 * max_distance
         ):
             break
-    return ego @ level
+    return LevelFit(ego @ level, robust)
