@@ -801,7 +801,7 @@ def _write_result(path, arrays, row, fingerprint, inputs=None, *, full=False):
     from mmreg import io as mmio
 
     meta = {"fingerprint": fingerprint, "row": row, "inputs": inputs}
-    meta = json.dumps(meta, default=_json_value)
+    meta = json.dumps(meta, default=json_value)
     arrays = arrays if full else _compact(arrays)
     with mmio.atomic_write(path) as handle:
         np.savez_compressed(handle, **arrays, meta=np.array(meta))
@@ -863,21 +863,21 @@ def _write_sweep_flow(out, job, arrays):
         write_scene_flow(path, arrays["sweep_flow"], arrays["sweep_dynamic"])
 
 
-def _json_value(value):
+def json_value(value):
+    """``json.dumps``'s ``default``: numpy scalars as Python numbers."""
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 @contextlib.contextmanager
-def _dask_backend(scheduler, n_workers):
-    """joblib's dask backend on the cluster at ``scheduler``, or on a new LocalCluster."""
-    import joblib
-
+def dask_client(scheduler, n_workers, needed_by="run_dataset"):
+    """A Dask client on the cluster at ``scheduler``, or on a new LocalCluster of
+    ``n_workers`` processes (``needed_by`` names the caller in the missing-package error)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ImportError("run_dataset needs dask.distributed: pip install 'mmreg[dask]'") from exc
+        raise ImportError(f"{needed_by} needs dask.distributed: pip install 'mmreg[dask]'") from exc
     with contextlib.ExitStack() as stack:
         if scheduler is None:
             # One thread per worker: the fits use numpy/scipy, which hold the GIL between
@@ -893,8 +893,15 @@ def _dask_backend(scheduler, n_workers):
                     )
                 )
             scheduler = cluster
-        stack.enter_context(Client(scheduler))
-        stack.enter_context(joblib.parallel_config(backend="dask"))
+        yield stack.enter_context(Client(scheduler))
+
+
+@contextlib.contextmanager
+def _dask_backend(scheduler, n_workers):
+    """joblib's dask backend on the cluster at ``scheduler``, or on a new LocalCluster."""
+    import joblib
+
+    with dask_client(scheduler, n_workers), joblib.parallel_config(backend="dask"):
         yield
 
 

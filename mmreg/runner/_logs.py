@@ -42,7 +42,6 @@ A single log writes these into ``out``; a folder of logs into ``out/<log>/``, wi
 import contextlib
 import dataclasses
 import json
-import logging
 import math
 import os
 import shutil
@@ -775,8 +774,10 @@ def _write_log(folder, out, job, result, row, fingerprint, stamps):
         "challenge": challenge,
         "velocity_unit": row.get("velocity_unit"),
     }
+    from mmreg.runner import json_value
+
     with mmio.atomic_write(folder / LOG_RECORD, "w") as handle:
-        handle.write(json.dumps(record, indent=1, default=_json_value) + "\n")
+        handle.write(json.dumps(record, indent=1, default=json_value) + "\n")
 
 
 def _exact_times(table):
@@ -787,37 +788,6 @@ def _exact_times(table):
     times = table["time_s"].to_numpy(float)
     text = np.where(np.isfinite(times), np.char.mod("%.6f", times), "")
     return table.assign(time_s=text)
-
-
-def _json_value(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
-
-
-@contextlib.contextmanager
-def _client(scheduler, n_workers):
-    """A Dask client on the cluster at ``scheduler``, or on a new LocalCluster."""
-    from mmreg.runner import _children_ignore_ctrl_c
-
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ImportError("run_logs needs dask.distributed: pip install 'mmreg[dask]'") from exc
-    with contextlib.ExitStack() as stack:
-        if scheduler is None:
-            with _children_ignore_ctrl_c():
-                cluster = stack.enter_context(
-                    LocalCluster(
-                        n_workers=n_workers,
-                        threads_per_worker=1,
-                        processes=True,
-                        dashboard_address=":0",
-                        silence_logs=logging.CRITICAL,
-                    )
-                )
-            scheduler = cluster
-        yield stack.enter_context(Client(scheduler))
 
 
 def run_logs(
@@ -943,7 +913,9 @@ def run_logs(
 
     def cluster(chosen, address, workers):
         begin = time.perf_counter()
-        with _client(address, workers) as client:
+        from mmreg.runner import dask_client
+
+        with dask_client(address, workers, needed_by="run_logs") as client:
             start_s = time.perf_counter() - begin
             _run_on(client, chosen, estimator, pictures, bar, handle)
         return start_s
