@@ -12,6 +12,9 @@ import numpy as np
 
 from mmreg.plotting._style import _qualitative
 
+# The ego body as the pictures of a pair draw it (pale blue).
+from mmreg.plotting._sweep import _BODY_COLOR
+
 __all__ = ["LOG_RANGE", "animate_log", "plot_log_frame", "track_color"]
 
 #: Half width of the window around the sensor, by default [m].
@@ -21,8 +24,9 @@ _MOVING, _STATIC = 251, 9
 # The static world's greys by height above its ground (light road, darker walls).
 _GROUND_GREY, _TALL_GREY, _TALL = 0.68, 0.22, 4.0
 _UNLABELLED_COLOR = (0.15, 0.15, 0.15)
-_BODY_COLOR = (0.85, 0.1, 0.1)
-_PALETTE_SIZE = 17  # tab10 without its grey, then tab20's light shades: no seaborn needed
+# tab10 without its grey, then tab20's light shades but the light blue of the ego body.
+_PALETTE_SIZE = 16
+_BODY_LIKE = 9
 
 
 def track_color(track):
@@ -31,10 +35,10 @@ def track_color(track):
     Examples
     --------
     >>> from mmreg.plotting._log import track_color
-    >>> track_color(1) == track_color(1 + 17), len(track_color(2))
+    >>> track_color(1) == track_color(1 + 16), len(track_color(2))
     (True, 3)
     """
-    palette = _qualitative(_PALETTE_SIZE)
+    palette = np.delete(_qualitative(_PALETTE_SIZE + 1), _BODY_LIKE, axis=0)
     return tuple(float(c) for c in palette[(int(track) - 1) % _PALETTE_SIZE])
 
 
