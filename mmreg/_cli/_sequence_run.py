@@ -138,40 +138,6 @@ def _configuration(args):
     }
 
 
-def _check_out(out, configuration, overwrite):
-    """Check ``out`` before any work; True when it holds an earlier run to resume."""
-    if not (out.exists() or out.is_symlink()):
-        return False
-    if not out.is_dir():
-        raise CLIError(f"{out}: exists and is not a folder; choose another --out")
-    try:
-        entries = list(out.iterdir())
-    except OSError as error:
-        raise CLIError(f"{out}: cannot be read: {one_line(error.strerror or error)}") from None
-    if not entries:
-        return False
-    foreign = foreign_names(out)
-    if foreign:
-        shown = ", ".join(foreign[:3]) + (", ..." if len(foreign) > 3 else "")
-        raise CLIError(
-            f"{out}: is a folder holding files that 'mmreg run' did not write ({shown}); it "
-            "is left as it is: choose another --out"
-        )
-    earlier = None
-    with reading(out / "run.json"):
-        if (out / "run.json").exists():
-            earlier = json.loads((out / "run.json").read_text()).get("configuration")
-    if overwrite or earlier != configuration:
-        if not overwrite and holds_results(out):
-            raise CLIError(
-                f"{out}: holds the results of another dataset or other options; pass "
-                "--overwrite to replace them, or choose another --out"
-            )
-        remove_results(out)
-        return False
-    return True
-
-
 def _write_record(out, record):
     from mmreg import io as mmio
 
@@ -185,7 +151,11 @@ def run_sequences(args, jobs):
 
     out = Path(args.out)
     configuration = _configuration(args)
-    resuming = _check_out(out, configuration, args.overwrite)
+    from mmreg._cli.dataset import check_run_out
+
+    resuming = check_run_out(out, configuration, overwrite=args.overwrite)
+    if not resuming and out.is_dir():  # another run's results, or --overwrite: replaced
+        remove_results(out)
     record = {"configuration": configuration, "logs": [job.name for job in jobs]}
     try:
         out.mkdir(parents=True, exist_ok=True)
