@@ -363,3 +363,55 @@ def test_a_frame_too_sparse_to_register_is_a_gap_with_a_warning(street):
     truth = np.linalg.inv(log.poses[5]) @ log.poses[4]
     found = np.linalg.inv(est.ego_poses_[5]) @ est.ego_poses_[4]
     assert np.linalg.norm(truth[:3, 3] - found[:3, 3]) < 0.05
+
+
+class _Blind(BaseEstimator):
+    """SweepRegistration that calls every cluster static: a pair that sees no motion."""
+
+    def __init__(self, random_state=None):
+        self.random_state = random_state
+
+    def fit(self, points, *, sweep, ego_motion=None):
+        est = SweepRegistration(random_state=self.random_state)
+        est = est.fit(points, sweep=sweep, ego_motion=ego_motion)
+        for name, value in vars(est).items():
+            if name.endswith("_") and not name.startswith("_"):
+                setattr(self, name, value)
+        self.moving_ = np.zeros_like(np.asarray(est.moving_, dtype=bool))
+        return self
+
+
+def test_movers_no_pair_detects_are_found_from_the_places_they_leave_and_reach(monkeypatch):
+    log = make_lidar_sequence(
+        6,
+        frame_rate=10.0,
+        n_moving=2,
+        n_braking=0,
+        n_overtaking=0,
+        n_walkers=0,
+        n_cyclists=0,
+        n_standing=0,
+        car_speed=8.0,
+        n_azimuths=512,
+        random_state=1,
+    )
+    cars = [i for i, kind in enumerate(log.kinds) if kind == "car"]
+    est = SequenceRegistration(_Blind(random_state=0), random_state=0)
+    est.fit(log.frames, times=log.times)
+    checked = 0
+    for car in cars:
+        held = [est.labels_[k][log.labels[k] == car] for k in range(1, 5)]
+        held = [h for h in held if len(h) >= 100]  # a far car of a few rings: no body
+        # One id holds most of the car's points in the middle frames.
+        ids = {int(np.bincount(h.clip(0)).argmax()) for h in held}
+        if held:
+            assert len(ids) == 1 and ids.pop() > 0
+            checked += 1
+    assert checked >= 1
+    for k in range(len(log.frames)):
+        assert not est.moving_[k][~log.moving[k]].any()
+    # Without the places, the blind pairs leave every car static.
+    monkeypatch.setattr("mmreg.tracking._log.LogTracker._moved_places", lambda self, *args: [])
+    est = SequenceRegistration(_Blind(random_state=0), random_state=0)
+    est.fit(log.frames, times=log.times)
+    assert not any(m.any() for m in est.moving_)

@@ -33,8 +33,11 @@ from mmreg._warnings import warn
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
+from mmreg.sweeps._islands import voxel_islands
 from mmreg.sweeps._level_icp import level_icp, level_part
-from mmreg.sweeps._motion_bounds import impossible_motions
+from mmreg.sweeps._motion_bounds import MAX_SPEED, impossible_motions
+from mmreg.sweeps._new_places import MIN_NEW_PLACE
+from mmreg.tracking._births import moved_places, new_place_share, place_starts
 from mmreg.tracking._evidence import near_points, track_claim
 from mmreg.tracking._motion import (
     compose,
@@ -83,6 +86,15 @@ _MIN_EVIDENCE = 4
 _HIDDEN = 0.05
 # Points kept per track (its shape for the prediction and the association).
 _TRACK_POINTS = 2000
+# The places the ego motion leaves unexplained are islands of voxels this share of tau
+# (the pair's islands'); MAX_SPEED is in metres a second, tau 5 stands for metres.
+_PLACE_CELL = 0.05
+_METRE_TAU = 5.0
+# The body of a place left is sought this far around it (share of tau: a car's length).
+_BODY_SPAN = 1.0
+# Where no interval in seconds is known, a place reached lies this share of tau away at
+# most (the pair's reach).
+_PLACE_REACH = 0.6
 
 
 @dataclass
@@ -338,10 +350,94 @@ class LogTracker:
         for rows, motion in detections.values():
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
+        # Objects the pair's clusters called static that left a place and reached one.
+        for rows, motion in self._moved_places(previous, frame, pair, free, dt):
+            track = self._born(previous, frame, rows, motion, dt)
+            seen[track.key] = len(rows)
         self._join_pieces(previous, seen, dt)
         for track in self._confirm_and_end(previous, seen):
             self._extend_back(track, previous)
         self._carry(previous, frame)
+
+    def _moved_places(self, previous, frame, pair, free, dt):
+        """Motions claimed from the places the ego motion leaves unexplained
+        (:mod:`mmreg.tracking._births`): ``[(rows, 4 x 4 motion)]`` of ``previous``'s
+        ``free`` rows, which they then leave.
+
+        Each island of the first sweep's free points that the second sweep does not
+        explain (a place left) tries the shifts onto the nearest such islands of the
+        second sweep (places reached) within a road user's reach, and a track's claim
+        decides, as it does for a track's prediction. Such a track is tentative: a
+        second pair must confirm it.
+        """
+        first, second = previous.returns, frame.returns
+        cell, margin = _PLACE_CELL * self.tau, _HIDDEN * self.tau
+        left, _ = moved_places(
+            first, np.flatnonzero(free), pair.ego, frame.target(), pair.scale,
+            frame.view(), margin, cell, self.min_points,
+        )  # fmt: skip
+        if not left:
+            return []
+        taken = ~(pair.sweep_ground | frame.body)
+        reached, new = moved_places(
+            second, np.flatnonzero(taken), inverse(pair.ego), previous.target(), pair.scale,
+            previous.view(), margin, cell, self.min_points,
+        )  # fmt: skip
+        arrived = np.zeros(len(second), dtype=bool)
+        arrived[new] = True
+        # A road user's reach in the interval (MAX_SPEED in metres a second).
+        speed = MAX_SPEED * self.tau / _METRE_TAU
+        reach = speed * dt if frame.seconds else _PLACE_REACH * self.tau
+        # Each place's body: where it left only its rear, a car's whole island.
+        bodies = [self._body_of(first, rows, free, cell) for rows in left]
+        starts = place_starts(
+            [first[rows] for rows in bodies],
+            [second[self._body_of(second, rows, taken, cell)] for rows in reached],
+            pair.ego,
+            reach,
+        )
+        found = []
+        for rows, body, tries in zip(left, bodies, starts, strict=True):
+            rows = rows[free[rows]]
+            if not tries or len(rows) < self.min_points:
+                continue
+            near = near_points(first, first[rows], _NEAR * self.tau, np.flatnonzero(free))
+            tight = np.union1d(near_points(first, first[rows], _TIGHT * self.tau, near), body)
+            tight = tight[free[tight]]
+            claim = track_claim(
+                first,
+                near,
+                tight,
+                tries,
+                pair.ego,
+                frame.target(),
+                pair.scale,
+                max_distance=0.2 * self.tau,
+                min_evidence=self.min_points,
+                up=previous.up,
+                view=frame.view(),
+                margin=margin,
+            )
+            if claim is None or not self._possible(previous, claim.rows, claim.motion, dt):
+                continue
+            # A repeated structure slid onto itself by one period lands on no new place.
+            landed = new_place_share(first[claim.rows], claim.motion, frame.target(), arrived)
+            if landed < MIN_NEW_PLACE:
+                continue
+            free[claim.rows] = False
+            found.append((claim.rows, claim.motion))
+        return found
+
+    def _body_of(self, points, rows, free, cell):
+        """The ``free`` points of the islands (voxels of side ``cell``) that hold ``rows``,
+        within a car's reach of them: the body whose place ``rows`` left (of a car that
+        moved less than its length, only its rear is a place left)."""
+        low = points[rows].min(axis=0) - _BODY_SPAN * self.tau
+        high = points[rows].max(axis=0) + _BODY_SPAN * self.tau
+        around = np.flatnonzero(free & np.all((points >= low) & (points <= high), axis=1))
+        labels, _ = voxel_islands(points[around], cell)
+        holding = np.isin(around, rows)
+        return around[np.isin(labels, np.unique(labels[holding]))]
 
     def _gap(self, previous, frame, dt):
         """A pair with a sweep too sparse to register (an empty message, a dropped
@@ -489,7 +585,13 @@ class LogTracker:
         scale = float(getattr(pair, "ego_scale_", np.nan))
         previous.scale = scale if np.isfinite(scale) and scale > 0 else 0.002 * self.tau
         previous.ground = _mask(getattr(pair, "ground_mask_", None), len(first))
-        return _Pair(ego=ego, scale=previous.scale, ground=previous.ground, detections=detections)
+        return _Pair(
+            ego=ego,
+            scale=previous.scale,
+            ground=previous.ground,
+            sweep_ground=_mask(getattr(pair, "sweep_ground_mask_", None), len(second)),
+            detections=detections,
+        )
 
     def _carried_body(self, previous, points):
         """The points of a sweep within the body's matching distance of where the last
@@ -844,6 +946,7 @@ class _Pair:
     ego: np.ndarray  # 4 x 4, first sweep to second
     scale: float  # the ego ICP's robust residual scale
     ground: np.ndarray  # the first sweep's ground (valid rows)
+    sweep_ground: np.ndarray  # the second sweep's
     detections: dict  # moving cluster -> (rows, 4 x 4 motion)
 
 
