@@ -10,7 +10,9 @@ step reads like KISS-ICP's ``register_frame``, one line per step (see
 3. associate the pair's moving clusters with the tracks whose predictions cover them;
 4. let each track claim, by its own motion, the points only it explains
    (:mod:`mmreg.tracking._evidence`), and update it;
-5. start tentative tracks on the clusters nobody holds; join tracks on pieces of one body;
+5. start tentative tracks on the clusters nobody holds, and on the motions claimed from
+   the places the ego motion leaves unexplained (:mod:`mmreg.tracking._births`); join
+   tracks on pieces of one body;
 6. confirm the tracks seen twice, run them backwards into the pending frames, coast or end
    the others;
 7. carry the tracks onto the second sweep.
