@@ -392,12 +392,18 @@ class LogTracker:
         reach = speed * dt if frame.seconds else _PLACE_REACH * self.tau
         # Each place's body: where it left only its rear, a car's whole island.
         bodies = [self._body_of(first, rows, free, cell) for rows in left]
-        starts = place_starts(
+        # The shifts of the bodies, and of the places themselves (a walker's body may be
+        # a wall's too).
+        body_starts = place_starts(
             [first[rows] for rows in bodies],
             [second[self._body_of(second, rows, taken, cell)] for rows in reached],
             pair.ego,
             reach,
         )
+        own_starts = place_starts(
+            [first[rows] for rows in left], [second[rows] for rows in reached], pair.ego, reach
+        )
+        starts = [a + b for a, b in zip(body_starts, own_starts, strict=True)]
         found = []
         for rows, body, tries in zip(left, bodies, starts, strict=True):
             rows = rows[free[rows]]
@@ -502,6 +508,15 @@ class LogTracker:
                 keep.hits = max(keep.hits, other.hits)
                 joined.add(other.key)
         state.tracks = [t for t in state.tracks if t.key not in joined]
+
+    def _seen(self, key):
+        """The last frame in which track ``key`` (or the track it joined) was seen."""
+        state = self._state
+        last = state.last_seen.get(key, -1)
+        while key in state.alias:
+            key = state.alias[key]
+            last = max(last, state.last_seen.get(key, -1))
+        return last
 
     def _identity(self, key):
         """The public id of track ``key`` (0: none), through the tracks it joined."""
@@ -741,6 +756,7 @@ class LogTracker:
         alive, confirmed = [], []
         for track in state.tracks:
             if track.key in seen:
+                state.last_seen[track.key] = previous.index
                 if not track.confirmed and track.hits >= 2:
                     state.n_confirmed += 1
                     track.identity = state.n_confirmed
@@ -853,7 +869,13 @@ class LogTracker:
             names = {int(k): self._identity(int(k)) for k in np.unique(keys)}
             return np.array([names[int(k)] for k in keys], dtype=np.intp).reshape(-1)
 
-        own, carried = ids(frame.track_of), ids(frame.carried)
+        # A few points (fewer than the smallest object) on which a track that no pair
+        # sees after this frame ends are what it left behind as it went out of view or
+        # stopped: the static world's. The last frame has no pair after it.
+        ending = after is not None
+        own_keys, remnants = self._without_remnants(frame.track_of, frame, ending)
+        carried_keys, _ = self._without_remnants(frame.carried, frame, ending)
+        own, carried = ids(own_keys), ids(carried_keys)
         if frame.pair_labels is not None:
             valid_labels = np.where(frame.pair_labels >= 0, 0, -1)
         else:
@@ -871,10 +893,12 @@ class LogTracker:
             body[rows] = frame.body[stand_in]
         flow = np.full((len(frame.points), 3), np.nan)
         if after is not None:
-            flow[rows] = self._flow(frame, after, own, carried)[stand_in]
+            flow[rows] = self._flow(frame, after, own, carried, remnants)[stand_in]
         # One row per track: pieces joined later keep the row with the most points.
         best = {}
         for r in frame.rows:
+            if r["key"] in remnants:
+                continue
             r["track"] = self._identity(r["key"])
             if r["track"] > 0 and r["points"] > best.get(r["track"], {"points": -1})["points"]:
                 best[r["track"]] = r
@@ -891,16 +915,33 @@ class LogTracker:
             tracks=self._table(rows),
         )
 
-    def _flow(self, frame, after, own, carried):
+    def _without_remnants(self, keys, frame, ending):
+        """``keys`` (track key per valid row, -1 none) without the tracks that hold fewer
+        than ``min_points`` rows and are seen in no frame after ``frame`` (only when
+        ``ending``), and those tracks' keys."""
+        if keys is None or not ending:
+            return keys, set()
+        present, counts = np.unique(keys[keys >= 0], return_counts=True)
+        gone = {
+            int(k)
+            for k, n in zip(present, counts, strict=True)
+            if n < self.min_points and self._seen(int(k)) <= frame.index
+        }
+        if not gone:
+            return keys, gone
+        return np.where(np.isin(keys, list(gone)), -1, keys), gone
+
+    def _flow(self, frame, after, own, carried, remnants=frozenset()):
         """The flow of ``frame``'s valid rows to ``after``: the pair's, a confirmed track's
-        own motion on its points, and for a track carried onto points the pair missed,
-        its last twist (constant velocity)."""
+        own motion on its points (but a track's ``remnants``), and for a track carried
+        onto points the pair missed, its last twist (constant velocity)."""
         first = frame.returns
         flow = frame.pair_flow.copy()
         for key, motion in frame.motions.items():
             rows = frame.track_of == key
-            # A ghost, never confirmed, moves with the static world.
-            moved = motion if self._identity(key) > 0 else frame.ego
+            # A ghost, never confirmed, moves with the static world; so do remnants.
+            confirmed = self._identity(key) > 0 and key not in remnants
+            moved = motion if confirmed else frame.ego
             flow[rows] = transform(moved, first[rows]) - first[rows]
         for key, (omega, velocity) in frame.carried_twists.items():
             rows = (frame.carried == key) & (own <= 0) & (carried > 0)
@@ -931,6 +972,7 @@ class _LogState:
     tracks: list = field(default_factory=list)
     identity: dict = field(default_factory=dict)
     alias: dict = field(default_factory=dict)  # a joined track's key -> the track it joined
+    last_seen: dict = field(default_factory=dict)  # track key -> the last frame it was seen in
     pending: list = field(default_factory=list)
     previous: LogFrame | None = None
     last_ego: tuple | None = None
