@@ -415,3 +415,24 @@ def test_movers_no_pair_detects_are_found_from_the_places_they_leave_and_reach(m
     est = SequenceRegistration(_Blind(random_state=0), random_state=0)
     est.fit(log.frames, times=log.times)
     assert not any(m.any() for m in est.moving_)
+
+
+def test_a_track_s_few_points_where_it_ends_are_static():
+    from mmreg.tracking._log import LogFrame, LogTracker
+
+    tracker = LogTracker(
+        None, tau=5.0, lookahead=2, max_misses=3, frame_rate=None, min_points=12,
+        rng=np.random.RandomState(0),
+    )  # fmt: skip
+    frame = LogFrame(5, np.zeros((40, 3)), np.ones(40, bool), 5.0)
+    # Track 1: 6 points, last seen here; track 2: 20 points, last seen here; track 3:
+    # 6 points, seen two frames later; track 4 joined track 3 (its key names track 3).
+    keys = np.r_[np.full(6, 1), np.full(20, 2), np.full(6, 3), np.full(4, 4), [-1] * 4]
+    tracker._state.last_seen.update({1: 5, 2: 5, 3: 7, 4: 4})
+    tracker._state.alias[4] = 3
+    kept, gone = tracker._without_remnants(keys, frame, ending=True)
+    assert gone == {1}
+    np.testing.assert_array_equal(kept, np.where(keys == 1, -1, keys))
+    # The log's last frame has no pair after it: nothing is a remnant there.
+    kept, gone = tracker._without_remnants(keys, frame, ending=False)
+    assert gone == set() and kept is keys
