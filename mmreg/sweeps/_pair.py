@@ -235,13 +235,16 @@ def _clusters(first, second, egos, sigma, settings, cluster, rng, timing, whole=
     ego, probe = egos
     a = first.points
     target = second.target()
-    islands, rotations, translations, _ = island_motions(first, second, probe, sigma, settings, rng)
-    # Label 0: the ego motion, for the small islands and every static one.
+    islands, rotations, translations, moving = island_motions(
+        first, second, probe, sigma, settings, rng
+    )
+    # Label 0: the ego motion, for the small islands and every static one (the
+    # estimator starts from one static cluster, not one per static island).
     motions = (
         np.concatenate([probe[0][None], rotations]),
         np.concatenate([probe[1][None], translations]),
     )
-    labels = islands + 1
+    labels = np.where(moving[np.maximum(islands, 0)] & (islands >= 0), islands + 1, 0)
     previous = None
     for round_ in range(1, settings.max_rounds + 1):
         X = np.hstack([a, rigid_flow(a, labels, *motions) + a])
