@@ -49,3 +49,15 @@ def test_the_estimator_starts_from_one_static_cluster():
     # Every other starting cluster is a moving island: the ego motion leaves it.
     others = np.unique(init[init > 0])
     assert len(others) and all(residual[init == k].max() > 1e-3 for k in others)
+
+
+def test_a_sweep_without_islands_starts_from_the_ego_motion_alone():
+    # No island reaches min_island_size: every point starts in the ego motion's cluster.
+    scene = make_lidar_sweeps(
+        n_beams=32, interval=0.1, ego_speed=5.0, n_azimuths=512, random_state=0
+    )
+    est = SweepRegistration(min_island_size=10**6, random_state=0)
+    est.fit(scene.a, sweep=scene.sweep)
+    init = est.estimator_.init_labels_
+    assert len(init) and (init == init[0]).all()
+    assert not est.moving_.any()

@@ -169,9 +169,11 @@ def island_motions(first, second, ego, sigma, settings, rng):
     # Objects that move by a few sampling spacings stay within the ego motion's
     # band and often share an island with a static structure: found point by point
     # among the points no moving island holds, they become islands of their own.
+    free = islands < 0  # and the islands at rest (none at all: every point)
+    free[~free] = ~moving[islands[~free]]
     slow, slow_rotations, slow_translations = slow_movers(
         a,
-        (islands < 0) | ~moving[np.maximum(islands, 0)],
+        free,
         ego,
         sigma,
         (sweep, tree, normals),

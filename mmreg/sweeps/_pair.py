@@ -244,7 +244,9 @@ def _clusters(first, second, egos, sigma, settings, cluster, rng, timing, whole=
         np.concatenate([probe[0][None], rotations]),
         np.concatenate([probe[1][None], translations]),
     )
-    labels = np.where(moving[np.maximum(islands, 0)] & (islands >= 0), islands + 1, 0)
+    on_moving = np.zeros(len(a), dtype=bool)
+    on_moving[islands >= 0] = moving[islands[islands >= 0]]
+    labels = np.where(on_moving, islands + 1, 0)
     previous = None
     for round_ in range(1, settings.max_rounds + 1):
         X = np.hstack([a, rigid_flow(a, labels, *motions) + a])
