@@ -6,7 +6,12 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from mmreg.sweeps._icp import SurfaceNormals
-from mmreg.sweeps._island_motions import choose_island_motions, ego_fit
+from mmreg.sweeps._island_motions import (
+    choose_island_motions,
+    ego_fit,
+    start_draws,
+    translation_starts,
+)
 
 
 def _box(rng, centre, n=120):
@@ -65,3 +70,29 @@ def test_no_island_the_ego_motion_explains_can_be_chosen(seed, shift, unseen):
     np.testing.assert_array_equal(choice[1][0], moving)
     np.testing.assert_array_equal(choice[1][1][moving], pick[moving])
     np.testing.assert_array_equal(choice[1][2][moving], explained[moving])
+
+
+@given(
+    seed=st.integers(0, 2**16),
+    wanted=st.lists(st.booleans(), min_size=5, max_size=5),
+)
+def test_the_starts_of_the_wanted_islands_are_the_starts_of_all(seed, wanted):
+    # Each island's histogram peaks are its own voters' alone: asked only of some
+    # islands (with the draws made beforehand), those islands get the same starts.
+    rng = np.random.default_rng(seed)
+    n_islands = 5
+    boxes = [_box(rng, [3.0 * k, 0.0, 0.0], n=80) for k in range(n_islands)]
+    a = np.vstack(boxes)
+    groups = np.repeat(np.arange(n_islands), [len(b) for b in boxes])
+    sweep = np.vstack([b + rng.normal(0.0, 0.4, 3) for b in boxes])
+    ego = (np.eye(3), np.zeros(3))
+    wanted = np.array(wanted)
+    common = dict(max_displacement=1.5, bin_size=0.25)
+    args = (a, groups, n_islands, sweep, groups, n_islands, ego)
+    every = translation_starts(*args, random_state=seed, **common)
+    draws = start_draws(groups, n_islands, len(sweep), seed)
+    some = translation_starts(*args, draws=draws, wanted=wanted, **common)
+    np.testing.assert_array_equal(some[wanted], every[wanted])
+    # The others keep their centroid starts only.
+    np.testing.assert_array_equal(some[~wanted, :3], every[~wanted, :3])
+    assert np.isnan(some[~wanted, 3:]).all()

@@ -220,8 +220,9 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         change). One: a second round, fed by the refined motions, found the same
         objects on every real and generated pair we hold, and cost a sixth of the fit.
     raw_init : {"islands", "estimator"}, default="islands"
-        Raw mode: the estimator's initial clusters. ``"islands"``: the islands (the first
-        round, slow movers included) or the last round's clusters, whose motions made
+        Raw mode: the estimator's initial clusters. ``"islands"``: the moving islands
+        and one cluster of all that keep the ego motion (the first round, slow movers
+        included) or the last round's clusters, whose motions made
         its correspondences (set as the ``init`` of the estimator's clone, when it has
         one); the same clusters as a Euclidean clustering on the shared Argoverse 2
         pairs in half the time, and the only way for the slow movers, which share

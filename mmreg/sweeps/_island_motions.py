@@ -40,6 +40,7 @@ __all__ = [
     "ego_fit",
     "facing_away",
     "point_costs",
+    "start_draws",
     "translation_starts",
 ]
 
@@ -84,6 +85,8 @@ def translation_starts(
     bin_size,
     random_state=None,
     moved=None,
+    draws=None,
+    wanted=None,
 ):
     """Starting translations of every island, relative to the ego motion.
 
@@ -108,6 +111,14 @@ def translation_starts(
     random_state : int, RandomState instance or None
     moved : ndarray of shape (n, 3) or None
         ``a`` moved by the ego motion, when the caller has it already.
+    draws : tuple or None
+        :func:`start_draws` of ``islands``, ``n_islands`` and ``len(sweep)``, made
+        earlier by a caller that draws more from ``random_state`` before it knows
+        ``wanted``; None: drawn here.
+    wanted : ndarray of bool of shape (n_islands,) or None
+        The islands whose histogram peaks are wanted (the others get none; each
+        island's peaks are its own voters' alone, so the wanted ones get the same
+        starts); None: all.
 
     Returns
     -------
@@ -130,7 +141,8 @@ def translation_starts(
     >>> bool(np.any(np.linalg.norm(starts[0] - [2.0, 0.0, 0.0], axis=1) < 0.2))
     True
     """
-    rng = check_random_state(random_state)
+    if draws is None:
+        draws = start_draws(islands, n_islands, len(sweep), random_state)
     if moved is None:
         moved = a @ ego[0].T + ego[1]
     starts = np.full((n_islands, 1 + _CENTROID_STARTS + _PEAKS, 3), np.nan)
@@ -150,8 +162,12 @@ def translation_starts(
         offsets = centroids2[np.minimum(nearest, n_islands2 - 1)] - centroids[:, None]
         starts[:, 1 : 1 + k] = np.where(near[:, :, None], offsets, np.nan)
     # Histogram peaks of the offsets from each island's voters to the sweep's points.
-    voters = subsample_groups(islands, _VOTERS, rng)
-    sample = sweep[rng.choice(len(sweep), min(len(sweep), _VOTE_SAMPLE), replace=False)]
+    voters, sample = draws
+    if wanted is not None:
+        voters = voters[wanted[islands[voters]]]
+        if not len(voters):
+            return starts
+    sample = sweep[sample]
     pairs = (
         cKDTree(moved[voters])
         .sparse_distance_matrix(cKDTree(sample), max_displacement, output_type="ndarray")
@@ -172,6 +188,26 @@ def translation_starts(
     top = rank < _PEAKS
     starts[votes[top, 0], 1 + _CENTROID_STARTS + rank[top]] = (votes[top, 1:4] + 0.5) * bin_size
     return starts
+
+
+def start_draws(islands, n_islands, n_sweep, random_state=None):
+    """What :func:`translation_starts` draws at random: ``(voters, sample)``, the voters
+    of every island (rows of the first sweep) and the sample of the second sweep's
+    ``n_sweep`` rows they vote towards; None where there is no island (nothing drawn).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.sweeps._island_motions import start_draws
+    >>> voters, sample = start_draws(np.repeat([0, 1], 50), 2, 20000, random_state=0)
+    >>> len(voters), len(sample)
+    (64, 10000)
+    """
+    if n_islands == 0:
+        return None
+    rng = check_random_state(random_state)
+    voters = subsample_groups(islands, _VOTERS, rng)
+    return voters, rng.choice(n_sweep, min(n_sweep, _VOTE_SAMPLE), replace=False)
 
 
 def point_costs(moved, target, *, max_distance, scale):

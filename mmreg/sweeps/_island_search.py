@@ -28,6 +28,7 @@ from mmreg.sweeps._island_motions import (
     driven_through,
     ego_fit,
     facing_away,
+    start_draws,
     translation_starts,
 )
 from mmreg.sweeps._slow_movers import beyond_spacing, slow_movers
@@ -168,9 +169,11 @@ def island_motions(first, second, ego, sigma, settings, rng):
     # Objects that move by a few sampling spacings stay within the ego motion's
     # band and often share an island with a static structure: found point by point
     # among the points no moving island holds, they become islands of their own.
+    free = islands < 0  # and the islands at rest (none at all: every point)
+    free[~free] = ~moving[islands[~free]]
     slow, slow_rotations, slow_translations = slow_movers(
         a,
-        (islands < 0) | ~moving[np.maximum(islands, 0)],
+        free,
         ego,
         sigma,
         (sweep, tree, normals),
@@ -224,25 +227,10 @@ def _island_hypotheses(islands, n_islands, search, reach, rng, last=False):
     at_rest, inside, rest_normals = search.at_rest, search.inside, search.rest_normals
     _, tree, normals = search.target
     settings = search.settings
-    starts = translation_starts(
-        a,
-        islands,
-        n_islands,
-        sweep,
-        search.islands2,
-        search.n_islands2,
-        ego,
-        max_displacement=reach,
-        bin_size=_BIN * settings.max_distance,
-        random_state=rng,
-        moved=at_rest,
-    )
-    n_starts = starts.shape[1]
-    # Every (island, start) pair is one cluster of one multi-body ICP.
+    # The starts' draws come first (the random state's order), their histograms once
+    # the islands that need no hypotheses are known.
+    draws = start_draws(islands, n_islands, len(sweep), rng)
     chosen = subsample_groups(islands, _HYPOTHESIS_POINTS, rng)
-    rows = np.repeat(chosen, n_starts)
-    pair = islands[rows] * n_starts + np.tile(np.arange(n_starts), len(chosen))
-    valid = np.isfinite(starts).all(axis=2).ravel()
     # Islands the ego motion explains too well for any motion to be chosen over it
     # need no ICP (most of the static world: half to three quarters of the islands).
     target = (sweep, tree, normals)
@@ -277,6 +265,25 @@ def _island_hypotheses(islands, n_islands, search, reach, rng, last=False):
         hidden[open_] &= ~through[islands[chosen[open_]]]
         fit = fit.with_hidden(islands[chosen], hidden)
     hopeless = fit.hopeless()
+    starts = translation_starts(
+        a,
+        islands,
+        n_islands,
+        sweep,
+        search.islands2,
+        search.n_islands2,
+        ego,
+        max_displacement=reach,
+        bin_size=_BIN * settings.max_distance,
+        moved=at_rest,
+        draws=draws,
+        wanted=~hopeless,
+    )
+    n_starts = starts.shape[1]
+    # Every (island, start) pair is one cluster of one multi-body ICP.
+    rows = np.repeat(chosen, n_starts)
+    pair = islands[rows] * n_starts + np.tile(np.arange(n_starts), len(chosen))
+    valid = np.isfinite(starts).all(axis=2).ravel()
     pair = np.where(valid[pair] & ~hopeless[islands[rows]], pair, -1)
     n_pairs = n_islands * n_starts
     rotations = np.broadcast_to(ego[0], (n_pairs, 3, 3)).copy()

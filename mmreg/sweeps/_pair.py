@@ -235,13 +235,18 @@ def _clusters(first, second, egos, sigma, settings, cluster, rng, timing, whole=
     ego, probe = egos
     a = first.points
     target = second.target()
-    islands, rotations, translations, _ = island_motions(first, second, probe, sigma, settings, rng)
-    # Label 0: the ego motion, for the small islands and every static one.
+    islands, rotations, translations, moving = island_motions(
+        first, second, probe, sigma, settings, rng
+    )
+    # Label 0: the ego motion, for the small islands and every static one (the
+    # estimator starts from one static cluster, not one per static island).
     motions = (
         np.concatenate([probe[0][None], rotations]),
         np.concatenate([probe[1][None], translations]),
     )
-    labels = islands + 1
+    on_moving = np.zeros(len(a), dtype=bool)
+    on_moving[islands >= 0] = moving[islands[islands >= 0]]
+    labels = np.where(on_moving, islands + 1, 0)
     previous = None
     for round_ in range(1, settings.max_rounds + 1):
         X = np.hstack([a, rigid_flow(a, labels, *motions) + a])
