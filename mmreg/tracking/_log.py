@@ -110,6 +110,7 @@ class LogFrame:
     pose: np.ndarray | None = None  # estimated sensor pose (world from sensor)
     given_pose: np.ndarray | None = None
     _target: tuple | None = None
+    _returns: np.ndarray | None = None
     state: object | None = None  # the pair estimator's per-sweep state (SweepState)
     _view: object | None = None
     # Set by the pair of which this frame is the first sweep:
@@ -133,7 +134,10 @@ class LogFrame:
 
     @property
     def returns(self):
-        return self.points[self.valid]
+        """The valid rows (a copy, made once: every step reads them)."""
+        if self._returns is None:
+            self._returns = self.points[self.valid]
+        return self._returns
 
     def view(self):
         """The range image of the valid rows, built once."""
