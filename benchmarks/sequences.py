@@ -25,7 +25,10 @@ clusters, frame k's labels from pair (k, k+1); the last frame has none). Columns
   waiting at a light is "moving"; no motion can show it);
 * ``found``: object-frames in which one track (or, for pairs, one cluster) holds at least
   half of a moving object's points, of all (:func:`mmreg.metrics.tracking_scores`);
-  ``found >= 50``: the same for objects of 50 points or more in that frame;
+  ``found >= 50``: the same for objects of 50 points or more in that frame, and
+  ``found >= 50, > 0.5 m/s`` for those of them that move at 0.5 m/s or faster (an
+  object's speed is its box centre's, world frame, to the next frame: its points'
+  centroid moves with the view);
 * ``false/frame``: tracks or clusters called moving of which less than half the points
   move, per frame; ``ID sw``: identity switches (CLEAR-MOT);
 * ``s/frame``: wall seconds per frame of the fit (the machine is shared: the load average
@@ -81,7 +84,7 @@ def nuscenes_log(folder):
         sequence = open_sequence(folder)
         poses = sequence.poses
     frames = [frame.points for frame in sequence]
-    moving, ignore, ids, speeds = [], [], [], []
+    moving, ignore, ids, centres = [], [], [], []
     previous, next_id = [], 1
     for k, points in enumerate(frames):
         name = Path(sequence.names[k]).stem
@@ -107,8 +110,9 @@ def nuscenes_log(folder):
             object_ids[_in_box(points, box) & move] = match
         previous = current
         ids.append(object_ids)
+        centres.append({match: centre for match, _, _, centre in current})
     times = np.arange(len(frames)) / 2.0 if sequence.timestamps is None else sequence.timestamps
-    speeds = _speeds(ids, frames, poses, times)
+    speeds = _speeds(ids, centres, times)
     return dict(
         frames=frames,
         times=times,
@@ -120,20 +124,19 @@ def nuscenes_log(folder):
     )
 
 
-def _speeds(ids, frames, poses, times):
-    """Per frame, per point: its object's speed (m/s) from its centroid to the next (or
-    last) frame's, NaN where it has no object."""
+def _speeds(ids, centres, times):
+    """Per frame, per point: its object's speed (m/s), from its box's world centre to the
+    next (or last) frame's (the points' centroid moves with the view: a car waiting at a
+    light reads 0.5-3 m/s by it), NaN where it has no object."""
     out = []
     for k, object_ids in enumerate(ids):
         speed = np.full(len(object_ids), np.nan)
         other = k + 1 if k + 1 < len(ids) else k - 1
         for i in np.unique(object_ids[object_ids > 0]):
-            here, there = object_ids == i, ids[other] == i
-            if not there.any():
+            if i not in centres[other]:
                 continue
-            a = frames[k][here] @ poses[k][:3, :3].T + poses[k][:3, 3]
-            b = frames[other][there] @ poses[other][:3, :3].T + poses[other][:3, 3]
-            speed[here] = np.linalg.norm(b.mean(0) - a.mean(0)) / abs(times[other] - times[k])
+            step = np.linalg.norm(centres[other][i] - centres[k][i])
+            speed[object_ids == i] = step / abs(times[other] - times[k])
         out.append(speed)
     return out
 
@@ -168,11 +171,20 @@ def scores(log, labels, moving, seconds):
     summary = tracking.summary()
     big = [np.where(np.bincount(ids)[ids] >= MIN_POINTS, ids, 0) for ids in log["ids"]]
     tracking_big = tracking_scores(big, predicted, ignore=log["ignore"])
+    # Objects that move visibly: 50 points or more, 0.5 m/s or faster.
+    fast = [
+        np.where(np.nan_to_num(speed, nan=0.0) >= SLOW, ids, 0)
+        for ids, speed in zip(big, log["speeds"], strict=True)
+    ]
+    tracking_fast = tracking_scores(fast, predicted, ignore=log["ignore"])
     return {
         "MOS IoU": moving_iou(log["moving"], moving, ignore=log["ignore"]),
         "IoU > 0.5 m/s": moving_iou(log["moving"], moving, ignore=fast_ignore),
         "found": f"{int(tracking.found.sum())}/{int(tracking.visible.sum())}",
         "found >= 50": f"{int(tracking_big.found.sum())}/{int(tracking_big.visible.sum())}",
+        "found >= 50, > 0.5 m/s": (
+            f"{int(tracking_fast.found.sum())}/{int(tracking_fast.visible.sum())}"
+        ),
         "false/frame": summary["false_tracks_per_frame"],
         "ID sw": summary["id_switches"],
         "s/frame": seconds,
