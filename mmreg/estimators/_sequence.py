@@ -37,8 +37,11 @@ class SequenceRegistration(BaseEstimator):
     (velocity and turn rate), associated with the detections that cover its prediction,
     and tested point by point against the static world in every pair: the points near
     its prediction that its motion explains on the next sweep and the ego motion does
-    not are its own, even where the pair left them in the static world. A track is
-    confirmed once its motion holds into a second pair; only confirmed tracks label
+    not are its own, even where the pair left them in the static world. Where no pair
+    saw a motion, the places an object left and reached (points each sweep leaves
+    unexplained in the other) start a track, if a motion between them explains them
+    (:mod:`mmreg.tracking._births`). A track is confirmed once its motion holds into a
+    second pair; only confirmed tracks label
     points, so a motion seen in one pair only is never reported. A confirmed track
     coasts through up to ``max_misses`` frames without evidence (an occlusion) and keeps
     its id.
