@@ -265,6 +265,10 @@ class LogTracker:
             if f.index <= index - 1 - self.lookahead
         ]
         state.pending = [f for f in state.pending if f.index > index - 1 - self.lookahead]
+        # When a track was last seen matters only against the frames still pending: an
+        # older sighting reads as none (memory stays bounded over a long log).
+        oldest = state.pending[0].index if state.pending else index
+        state.last_seen = {k: f for k, f in state.last_seen.items() if f >= oldest}
         return finished
 
     def _voxels(self, points, valid):
