@@ -11,7 +11,14 @@ import time
 from pathlib import Path
 
 from mmreg._cli._common import CLIError, one_line, plural, reading
-from mmreg._cli.register import TAU_RULE, _positive_int, _seed, _tau, resolve_tau
+from mmreg._cli.register import (
+    TAU_RULE,
+    _positive_float,
+    _positive_int,
+    _seed,
+    _tau,
+    resolve_tau,
+)
 
 NAME = "run"
 HELP = "process LiDAR logs (tracks per log) or a dataset of pairs on Dask"
@@ -257,7 +264,7 @@ def add_arguments(parser):
     )
     parser.add_argument(
         "--voxel-size",
-        type=_positive_length,
+        type=_positive_float,
         metavar="V",
         default=None,
         help="logs: register one point per voxel of side V (the points' units; 0.1 for "
@@ -266,7 +273,7 @@ def add_arguments(parser):
     )
     parser.add_argument(
         "--frame-rate",
-        type=_frame_rate,
+        type=_positive_float,
         metavar="HZ",
         default=None,
         help="frames per second where the log's frames have no times (nuScenes keyframes: "
@@ -368,26 +375,6 @@ def _workers(text):
         raise argparse.ArgumentTypeError(f"expected a whole number; got {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be 0 (in this process) or more; got {value}")
-    return value
-
-
-def _positive_length(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a length; got {text!r}") from None
-    if not (0 < value < float("inf")):
-        raise argparse.ArgumentTypeError(f"must be a positive length; got {text}")
-    return value
-
-
-def _frame_rate(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected frames per second; got {text!r}") from None
-    if not (0 < value < float("inf")):
-        raise argparse.ArgumentTypeError(f"must be a positive number of Hz; got {text}")
     return value
 
 
