@@ -196,13 +196,47 @@ def view_log(args):
     return 0
 
 
+def _moving_scores(truth, pred, ignore):
+    """The moving points' IoU and counts over the frames with labels (NaN without)."""
+    from mmreg.metrics import moving_iou
+
+    if not truth:
+        return {
+            "frames_labelled": 0,
+            "mos_iou": math.nan,
+            "moving_points_true": math.nan,
+            "moving_points_predicted": math.nan,
+        }
+    kept = [~i for i in ignore]
+    return {
+        "frames_labelled": len(truth),
+        "mos_iou": moving_iou(truth, pred, ignore=ignore),
+        "moving_points_true": sum(int((t & k).sum()) for t, k in zip(truth, kept, strict=True)),
+        "moving_points_predicted": sum(int((p & k).sum()) for p, k in zip(pred, kept, strict=True)),
+    }
+
+
+def _pose_scores(translation, rotation):
+    """Mean and largest relative pose errors (m and degrees; NaN without any)."""
+    import numpy as np
+
+    if not len(translation):
+        return dict.fromkeys(("rpe_m_mean", "rpe_m_max", "rpe_deg_mean", "rpe_deg_max"), math.nan)
+    return {
+        "rpe_m_mean": float(np.mean(translation)),
+        "rpe_m_max": float(np.max(translation)),
+        "rpe_deg_mean": float(np.mean(rotation)),
+        "rpe_deg_max": float(np.max(rotation)),
+    }
+
+
 # --------------------------------------------------------------------------- evaluate
 def evaluate_log(result):
     """The scores of one log: ``{name: value}`` (NaN where not measured)."""
     import numpy as np
 
     from mmreg import io as mmio
-    from mmreg.metrics import moving_iou, relative_pose_errors, tracking_scores
+    from mmreg.metrics import relative_pose_errors, tracking_scores
 
     sequence = result.sequence()
     root = Path(result.record["path"])
@@ -224,42 +258,21 @@ def evaluate_log(result):
         if instances:
             true_ids.append(np.where(moving, found.instance, 0))
             pred_ids.append(np.where(semantic == _MOVING, instance, 0))
-    scores = {
-        "frames": len(result.names),
-        "frames_labelled": len(truth),
-        "mos_iou": math.nan,
-        "moving_points_true": math.nan,
-        "moving_points_predicted": math.nan,
-    }
-    if truth:
-        scores["mos_iou"] = moving_iou(truth, pred, ignore=ignore)
-        kept = [~i for i in ignore]
-        scores["moving_points_true"] = sum(
-            int((t & k).sum()) for t, k in zip(truth, kept, strict=True)
-        )
-        scores["moving_points_predicted"] = sum(
-            int((p & k).sum()) for p, k in zip(pred, kept, strict=True)
-        )
-        if instances and true_ids:
-            found = tracking_scores(true_ids, pred_ids, ignore=ignore).summary()
-            scores["objects_true"] = found["objects"]
-            scores["objects_found_share"] = found["found_share"]
-            scores["id_switches"] = found["id_switches"]
-            scores["false_tracks_per_frame"] = found["false_tracks_per_frame"]
+    scores = {"frames": len(result.names), **_moving_scores(truth, pred, ignore)}
+    if instances and true_ids:
+        found = tracking_scores(true_ids, pred_ids, ignore=ignore).summary()
+        scores["objects_true"] = found["objects"]
+        scores["objects_found_share"] = found["found_share"]
+        scores["id_switches"] = found["id_switches"]
+        scores["false_tracks_per_frame"] = found["false_tracks_per_frame"]
     with reading(root):  # a broken poses file names itself
         true_poses = getattr(sequence, "poses", None)
-    for key in ("rpe_m_mean", "rpe_m_max", "rpe_deg_mean", "rpe_deg_max"):
-        scores[key] = math.nan
-    scores["poses_given"] = bool(result.record.get("row", {}).get("poses_given", False))
+    translation, rotation = [], []
     if true_poses is not None:
         translation, rotation = relative_pose_errors(result.poses(), true_poses)
-        scores.update(
-            rpe_m_mean=float(translation.mean()),
-            rpe_m_max=float(translation.max()),
-            rpe_deg_mean=float(rotation.mean()),
-            rpe_deg_max=float(rotation.max()),
-        )
-    elif not truth:
+    scores.update(_pose_scores(translation, rotation))
+    scores["poses_given"] = bool(result.record.get("row", {}).get("poses_given", False))
+    if true_poses is None and not truth:
         raise CLIError(
             f"{result.name}: its log ({root}) has neither labels (labels/<frame>.label) nor "
             "poses to score against"
@@ -365,7 +378,7 @@ def evaluate_pair_log(run, log, jobs):
 
     from mmreg import io as mmio
     from mmreg.datasets import open_sequence
-    from mmreg.metrics import moving_iou, relative_pose_errors
+    from mmreg.metrics import relative_pose_errors
     from mmreg.runner import read_job_result
     from mmreg.runner._logs import frame_names
 
@@ -421,33 +434,10 @@ def evaluate_pair_log(run, log, jobs):
             rotation.append(float(errors[1][0]))
     if not done:
         raise CLIError(f"{run}: holds no finished job of {log}; run 'mmreg run' again")
-    scores = {
-        "pairs": done,
-        "frames_labelled": len(truth),
-        "mos_iou": math.nan,
-        "moving_points_true": math.nan,
-        "moving_points_predicted": math.nan,
-    }
-    if truth:
-        scores["mos_iou"] = moving_iou(truth, pred, ignore=ignore)
-        kept = [~i for i in ignore]
-        scores["moving_points_true"] = sum(
-            int((t & k).sum()) for t, k in zip(truth, kept, strict=True)
-        )
-        scores["moving_points_predicted"] = sum(
-            int((p & k).sum()) for p, k in zip(pred, kept, strict=True)
-        )
-    for key in ("rpe_m_mean", "rpe_m_max", "rpe_deg_mean", "rpe_deg_max"):
-        scores[key] = math.nan
+    scores = {"pairs": done, **_moving_scores(truth, pred, ignore)}
+    scores.update(_pose_scores(translation, rotation))
     scores["poses_given"] = bool(first.poses and true_poses is not None)
-    if translation:
-        scores.update(
-            rpe_m_mean=float(np.mean(translation)),
-            rpe_m_max=float(np.max(translation)),
-            rpe_deg_mean=float(np.mean(rotation)),
-            rpe_deg_max=float(np.max(rotation)),
-        )
-    elif not truth:
+    if not translation and not truth:
         raise CLIError(
             f"{log}: has neither labels (labels/<frame>.label) nor poses to score the pairs "
             "of its run against; give TRUTH to score one job"
