@@ -946,10 +946,7 @@ def run_logs(
     frame = pd.DataFrame([rows[job.name] for job in jobs])
     columns = SUMMARY_COLUMNS + [c for c in frame.columns if c not in SUMMARY_COLUMNS]
     frame = frame.reindex(columns=columns)
-    for column in ("error", "changed_input", "warnings"):
-        if column in frame:
-            frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
-    for column in ("picture_error",):
+    for column in ("error", "changed_input", "warnings", "picture_error"):
         if column in frame:
             frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
     if any(getattr(job, "folder", "") for job in jobs):
