@@ -53,6 +53,7 @@ __all__ = [
     "bound_motions",
     "impossible_motions",
     "level_shift",
+    "max_travel",
     "object_motions",
 ]
 
@@ -67,6 +68,21 @@ PERSON_TURN_RATE = 2 * np.pi
 PERSON_LENGTH = 1.2
 # The tau that stands for metres.
 _METRE_TAU = 5.0
+
+
+def max_travel(scale, interval):
+    """The farthest a road user travels in ``interval`` seconds (:data:`MAX_SPEED`), in
+    the points' units (``scale`` is the estimator's ``tau``; 5 stands for metres).
+
+    Examples
+    --------
+    >>> from mmreg.sweeps._motion_bounds import max_travel
+    >>> max_travel(5.0, 0.1), max_travel(0.5, 0.1)
+    (5.0, 0.5)
+    """
+    return MAX_SPEED * (scale / _METRE_TAU) * interval
+
+
 # A sheet is level within this angle (its normal within it of the vertical).
 _LEVEL_DEG = 30.0
 # The level shift's ICP (mmreg.sweeps._level_icp without the turn): its gate in units of
@@ -224,7 +240,7 @@ def impossible_motions(points, labels, motions, static, *, scale, reach, interva
     if interval is None:
         rules.append(("reach", travel > reach))
     else:
-        rules.append(("speed", travel > MAX_SPEED * metres * interval))
+        rules.append(("speed", travel > max_travel(scale, interval)))
         person = _lengths_across(moments, up) <= PERSON_LENGTH * metres
         rate = np.where(person, PERSON_TURN_RATE, VEHICLE_TURN_RATE)
         rules.append(("turn", turn > rate * interval))

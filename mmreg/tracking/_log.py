@@ -37,7 +37,7 @@ from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
 from mmreg.sweeps._islands import voxel_islands
 from mmreg.sweeps._level_icp import level_icp, level_part
-from mmreg.sweeps._motion_bounds import MAX_SPEED, impossible_motions
+from mmreg.sweeps._motion_bounds import impossible_motions, max_travel
 from mmreg.sweeps._new_places import MIN_NEW_PLACE
 from mmreg.tracking._births import moved_places, new_place_share, place_starts
 from mmreg.tracking._evidence import near_points, track_claim
@@ -88,10 +88,8 @@ _MIN_EVIDENCE = 4
 _HIDDEN = 0.05
 # Points kept per track (its shape for the prediction and the association).
 _TRACK_POINTS = 2000
-# The places the ego motion leaves unexplained are islands of voxels this share of tau
-# (the pair's islands'); MAX_SPEED is in metres a second, tau 5 stands for metres.
+# The places the ego motion leaves unexplained are islands of voxels this share of tau.
 _PLACE_CELL = 0.05
-_METRE_TAU = 5.0
 # The body of a place left is sought this far around it (share of tau: a car's length).
 _BODY_SPAN = 1.0
 # Where no interval in seconds is known, a place reached lies this share of tau away at
@@ -395,9 +393,8 @@ class LogTracker:
         )  # fmt: skip
         arrived = np.zeros(len(second), dtype=bool)
         arrived[new] = True
-        # A road user's reach in the interval (MAX_SPEED in metres a second).
-        speed = MAX_SPEED * self.tau / _METRE_TAU
-        reach = speed * dt if frame.seconds else _PLACE_REACH * self.tau
+        # A road user's reach in the interval.
+        reach = max_travel(self.tau, dt) if frame.seconds else _PLACE_REACH * self.tau
         # Each place's body: where it left only its rear, a car's whole island.
         bodies = [self._body_of(first, rows, free, cell) for rows in left]
         # The shifts of the bodies, and of the places themselves (a walker's body may be
@@ -517,21 +514,20 @@ class LogTracker:
                 joined.add(other.key)
         state.tracks = [t for t in state.tracks if t.key not in joined]
 
+    def _joined(self, key):
+        """Track ``key`` and the tracks it joined, in turn."""
+        keys = [key]
+        while keys[-1] in self._state.alias:
+            keys.append(self._state.alias[keys[-1]])
+        return keys
+
     def _seen(self, key):
-        """The last frame in which track ``key`` (or the track it joined) was seen."""
-        state = self._state
-        last = state.last_seen.get(key, -1)
-        while key in state.alias:
-            key = state.alias[key]
-            last = max(last, state.last_seen.get(key, -1))
-        return last
+        """The last frame in which track ``key`` (or a track it joined) was seen."""
+        return max(self._state.last_seen.get(k, -1) for k in self._joined(key))
 
     def _identity(self, key):
         """The public id of track ``key`` (0: none), through the tracks it joined."""
-        state = self._state
-        while key in state.alias:
-            key = state.alias[key]
-        return state.identity.get(key, 0)
+        return self._state.identity.get(self._joined(key)[-1], 0)
 
     def _carry(self, previous, frame):
         """Where each track seen in ``previous`` lands in ``frame``: the points of the
