@@ -10,7 +10,13 @@ tears off (``SweepRegistration``) all ask this one question, by these rules.
 
 import numpy as np
 
-__all__ = ["EXPLAINED_SPACINGS", "OFF_PLANE_SCALES", "spacing_ratio", "unexplained_mask"]
+__all__ = [
+    "EXPLAINED_SPACINGS",
+    "OFF_PLANE_SCALES",
+    "spacing_ratio",
+    "unexplained_at",
+    "unexplained_mask",
+]
 
 # A point is unexplained beyond this many spacings from the second sweep.
 EXPLAINED_SPACINGS = 2.0
@@ -88,6 +94,14 @@ def unexplained_mask(points, tree, sweep, normals, scale):
     [False, False, True]
     """
     ratio, nearest, spacing = spacing_ratio(points, tree, sweep, normals)
+    return unexplained_at(points, (ratio, nearest, spacing), sweep, normals, scale), ratio
+
+
+def unexplained_at(points, nearest_spacings, sweep, normals, scale):
+    """:func:`unexplained_mask` from the points' :func:`spacing_ratio` already found
+    (``(ratio, nearest, spacing)``): callers that ask of the same points under several
+    motions query the tree once per motion."""
+    ratio, nearest, spacing = nearest_spacings
     far = np.flatnonzero(ratio > 1.0)
     unexplained = np.zeros(len(points), dtype=bool)
     if len(far):
@@ -97,4 +111,4 @@ def unexplained_mask(points, tree, sweep, normals, scale):
         beyond = ratio[far] > EXPLAINED_SPACINGS
         off_plane = ~line & (along > OFF_PLANE_SCALES * scale)
         unexplained[far] = (beyond & (line | (along > spacing[far]))) | off_plane
-    return unexplained, ratio
+    return unexplained

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_mask
+from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_at
 from mmreg.sweeps._icp import multi_body_icp
 from mmreg.sweeps._level_icp import level_icp, level_part
 from mmreg.tracking._motion import transform
@@ -97,19 +97,68 @@ def claimed_points(points, motion, ego, target, scale, view=None, margin=0.0):
     >>> int(claimed[: len(face)].sum()), int(claimed[len(face) :].sum())
     (90, 0)
     """
-    sweep, tree, normals = target
-    rest, moved = transform(ego, points), transform(motion, points)
-    at_rest, _ = unexplained_mask(rest, tree, sweep, normals, scale)
-    ratio, _, _ = spacing_ratio(moved, tree, sweep, normals)
-    claimed = at_rest & (ratio <= EXPLAINED_SPACINGS)
-    if view is not None and claimed.any():
-        # Hidden, unless what hides it is the point itself where the motion puts it (a
-        # car coming closer hides the place it left).
-        occluder = view.nearest_return(rest[claimed])
-        hidden = occluder < np.linalg.norm(rest[claimed], axis=1) - margin
-        itself = np.abs(occluder - np.linalg.norm(moved[claimed], axis=1)) <= margin
-        claimed[claimed] = ~hidden | itself
-    return claimed
+    return _Answers(points, target, scale, view, margin).claimed(motion, ego)
+
+
+class _Answers:
+    """The second sweep's answers about one set of first-sweep points, under each motion
+    asked, kept: a claim asks of the same points under the ego motion and every start,
+    and again under each refined motion (the tree is queried once per motion)."""
+
+    def __init__(self, points, target, scale, view=None, margin=0.0):
+        self.points, self.target, self.scale = points, target, scale
+        self.view, self.margin = view, margin
+        self._moved = {}  # motion's bytes -> (moved points, (ratio, nearest, spacing))
+        self._unexplained = {}
+        self._occluder = {}  # motion's bytes -> the nearest return towards each point
+
+    def moved(self, motion):
+        """The points moved by ``motion`` and their :func:`spacing_ratio`."""
+        key = motion.tobytes()
+        if key not in self._moved:
+            sweep, tree, normals = self.target
+            moved = transform(motion, self.points)
+            self._moved[key] = (moved, spacing_ratio(moved, tree, sweep, normals))
+        return self._moved[key]
+
+    def explained(self, motion):
+        """Whether ``motion`` puts each point within two spacings of the sweep."""
+        return self.moved(motion)[1][0] <= EXPLAINED_SPACINGS
+
+    def unexplained(self, motion):
+        """Whether the sweep leaves each point unexplained where ``motion`` puts it."""
+        key = motion.tobytes()
+        if key not in self._unexplained:
+            sweep, _, normals = self.target
+            moved, nearest_spacings = self.moved(motion)
+            self._unexplained[key] = unexplained_at(
+                moved, nearest_spacings, sweep, normals, self.scale
+            )
+        return self._unexplained[key]
+
+    def _nearest_return(self, motion, rows):
+        key = motion.tobytes()
+        if key not in self._occluder:
+            self._occluder[key] = np.full(len(self.points), np.nan)
+        occluder = self._occluder[key]
+        ask = rows[np.isnan(occluder[rows])]
+        if len(ask):
+            occluder[ask] = self.view.nearest_return(self.moved(motion)[0][ask])
+        return occluder[rows]
+
+    def claimed(self, motion, ego):
+        """:func:`claimed_points` of these points."""
+        claimed = self.unexplained(ego) & self.explained(motion)
+        if self.view is not None and claimed.any():
+            # Hidden, unless what hides it is the point itself where the motion puts it
+            # (a car coming closer hides the place it left).
+            rows = np.flatnonzero(claimed)
+            rest, moved = self.moved(ego)[0][rows], self.moved(motion)[0][rows]
+            occluder = self._nearest_return(ego, rows)
+            hidden = occluder < np.linalg.norm(rest, axis=1) - self.margin
+            itself = np.abs(occluder - np.linalg.norm(moved, axis=1)) <= self.margin
+            claimed[rows] = ~hidden | itself
+        return claimed
 
 
 @dataclass
@@ -167,15 +216,14 @@ def track_claim(
     # points (a car near a 64-beam sensor holds thousands); the winner on them all.
     near_sample, tight_sample = _thin(near), _thin(tight)
     share = len(near) / len(near_sample)
+    on_sample = _Answers(points[near_sample], target, scale, view, margin)
+    on_tight_sample = _Answers(points[tight_sample], target, scale)
     seeds, motions, counts = [], [], []
     for start in starts:
-        claimed = claimed_points(points[near_sample], start, ego, target, scale, view, margin)
-        evidence = near_sample[claimed]
+        evidence = near_sample[on_sample.claimed(start, ego)]
         if share * len(evidence) < min_evidence:
             continue
-        moved = transform(start, points[tight_sample])
-        ratio, _, _ = spacing_ratio(moved, tree, sweep, normals)
-        seeds.append(np.union1d(evidence, tight_sample[ratio <= EXPLAINED_SPACINGS]))
+        seeds.append(np.union1d(evidence, tight_sample[on_tight_sample.explained(start)]))
         motions.append(start)
         counts.append(len(evidence))
     if not seeds:
@@ -217,24 +265,24 @@ def track_claim(
             refined = np.eye(4)
             refined[:3, :3], refined[:3, 3] = result.rotations[k], result.translations[k]
             refined_motions.append(refined)
+    on_near = _Answers(points[near], target, scale, view, margin)
+    on_tight = _Answers(points[tight], target, scale)
     best = None
     for refined in refined_motions:
-        evidence = near[claimed_points(points[near], refined, ego, target, scale, view, margin)]
+        claimed = on_near.claimed(refined, ego)
+        evidence = near[claimed]
         # Noise leaves a few points of a still object unexplained at rest, which a
         # small motion explains: as many as that motion leaves unexplained that the
         # ego motion explains. A moving object's evidence outweighs its counter-evidence.
-        against = np.count_nonzero(
-            claimed_points(points[near], ego, refined, target, scale, view, margin)
-        )
+        against = np.count_nonzero(on_near.claimed(ego, refined))
         score = len(evidence) - _AGAINST * against
         if score < min_evidence or (best is not None and score <= best.evidence):
             continue
-        moved = transform(refined, points[evidence])
-        _, _, spacing = spacing_ratio(moved, tree, sweep, normals)
-        departure = np.linalg.norm(moved - transform(ego, points[evidence]), axis=1)
+        moved = on_near.moved(refined)[0][claimed]
+        spacing = on_near.moved(refined)[1][2][claimed]
+        departure = np.linalg.norm(moved - on_near.moved(ego)[0][claimed], axis=1)
         if np.median(departure) <= EXPLAINED_SPACINGS * np.median(spacing):
             continue
-        ratio, _, _ = spacing_ratio(transform(refined, points[tight]), tree, sweep, normals)
-        rows = np.union1d(evidence, tight[ratio <= EXPLAINED_SPACINGS])
+        rows = np.union1d(evidence, tight[on_tight.explained(refined)])
         best = Claim(rows, score, refined)
     return best
