@@ -24,6 +24,9 @@ __all__ = ["SequenceRegistration"]
 
 # Gauss-Newton steps of the default pair estimator's ICPs (SweepRegistration's own: 30).
 _PAIR_ICP_ITER = 15
+# The default pair estimator's islands search once, within the reach (see
+# SweepRegistration's widen_reach).
+_PAIR_WIDEN_REACH = False
 # The default pair estimator's smallest island (SweepRegistration's min_island_size).
 _MIN_ISLAND_SIZE = 12
 
@@ -52,10 +55,12 @@ class SequenceRegistration(BaseEstimator):
         Registers two raw sweeps: ``fit(points1, sweep=points2, ego_motion=(R, t))`` with
         ``labels_``, ``moving_``, ``static_cluster_``, ``rotations_``, ``translations_``,
         ``flow_`` and ``ego_motion_``; cloned for every pair, and seeded from
-        ``random_state`` when its own is None. None: ``SweepRegistration(max_icp_iter=15)``:
-        in a log the ego motion starts from the last one and the tracks refine their own
-        motions, and half the ICP steps gave the same figures on the shared nuScenes and
-        generated logs in 10-25 % less time.
+        ``random_state`` when its own is None. None:
+        ``SweepRegistration(max_icp_iter=15, widen_reach=False)``: in a log the ego
+        motion starts from the last one and the tracks refine their own motions (half
+        the ICP steps gave the same figures on the shared nuScenes and generated logs in
+        10-25 % less time), and a mover beyond the islands' reach is found from the
+        places it leaves and reaches (the wider search found nothing more).
     tau : float, default=5.0
         The one length, in the points' units (5 for metres, as the pair estimator's).
     lookahead : int, default=2
@@ -321,7 +326,9 @@ class SequenceRegistration(BaseEstimator):
 
 def default_pair_estimator(**params):
     """The pair estimator a log's pairs get by default: ``SweepRegistration`` with 15 ICP
-    steps (see ``pair_estimator``) and ``params``."""
+    steps, searching once within the reach (see ``pair_estimator``), and ``params``."""
     from mmreg.estimators._two_sweeps import SweepRegistration
 
-    return SweepRegistration(**{"max_icp_iter": _PAIR_ICP_ITER, **params})
+    return SweepRegistration(
+        **{"max_icp_iter": _PAIR_ICP_ITER, "widen_reach": _PAIR_WIDEN_REACH, **params}
+    )

@@ -215,6 +215,11 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Being a guess, ``"auto"`` is widened where the data ask: islands that neither
         the ego motion nor any motion within it explains search again twice as far
         (a slow ego car 0.5 s apart from a car 5 m on). A number is a bound.
+    widen_reach : bool, default=True
+        Raw mode: whether an ``"auto"`` ``max_displacement`` is widened where the data
+        ask (above). False: one search within the reach, what
+        ``SequenceRegistration``'s pairs use: its tracks find such a mover from the
+        places it leaves and reaches, and its logs run 1-17 % faster.
     max_rounds : int, default=1
         Raw mode: most rounds of estimator and ICP (further rounds run while the labels
         change). One: a second round, fed by the refined motions, found the same
@@ -384,6 +389,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         "island_radius": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
         "min_island_size": [Interval(Integral, 1, None, closed="left")],
         "max_displacement": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
+        "widen_reach": ["boolean"],
         "max_rounds": [Interval(Integral, 1, None, closed="left")],
         "raw_init": [StrOptions({"islands", "estimator"})],
         "ground": [StrOptions({"auto", "keep", "drop"})],
@@ -401,6 +407,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         island_radius="auto",
         min_island_size=12,
         max_displacement="auto",
+        widen_reach=True,
         max_rounds=1,
         raw_init="islands",
         ground="auto",
@@ -414,6 +421,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.island_radius = island_radius
         self.min_island_size = min_island_size
         self.max_displacement = max_displacement
+        self.widen_reach = widen_reach
         self.max_rounds = max_rounds
         self.raw_init = raw_init
         self.ground = ground
@@ -846,6 +854,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             min_island_size=self.min_island_size,
             max_displacement=self.max_displacement_,
             auto_reach=self.max_displacement == "auto",
+            widen=self.widen_reach,
             max_icp_iter=self.max_icp_iter,
             max_points=self.max_points,
             max_rounds=self.max_rounds,

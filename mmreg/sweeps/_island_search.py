@@ -113,7 +113,7 @@ def island_motions(first, second, ego, sigma, settings, rng):
     moving, rotations, translations, unexplained, explained = _island_hypotheses(
         islands, n_islands, search, reach, rng
     )
-    if settings.auto_reach:
+    if settings.auto_reach and settings.widen:
         # The reach is a guess at the traffic's speed times the sweeps' interval, which
         # the points do not give: a slow ego car 0.5 s apart leaves a 5 m mover beyond
         # it. Islands that neither the ego motion nor any motion within the reach

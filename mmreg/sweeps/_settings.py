@@ -21,6 +21,7 @@ class PairSettings(NamedTuple):
     min_island_size: int  # smaller islands take the ego motion
     max_displacement: float  # the reach of the islands' motions (grown by the ego step)
     auto_reach: bool  # whether max_displacement is a guess ("auto") or a bound
+    widen: bool  # whether islands nothing within a guessed reach explains search farther
     max_icp_iter: int  # Gauss-Newton steps of every ICP
     max_points: int | None  # points per cluster of an ICP
     max_rounds: int  # rounds of estimator and ICP
