@@ -268,8 +268,8 @@ def add_arguments(parser):
         metavar="V",
         default=None,
         help="logs: register one point per voxel of side V (the points' units; 0.1 for "
-        "metres is a quarter faster on a 64-beam sensor); every point takes its voxel's "
-        "labels (default: every point)",
+        "metres is a third faster on a 64-beam sensor and loses some objects); every point "
+        "takes its voxel's labels (default: every point)",
     )
     parser.add_argument(
         "--frame-rate",
