@@ -12,8 +12,9 @@ The logs:
   ``tar xJf ../shared/realdata/nuscenes_sequences/scene-0004.tar.xz -C DIR``. Never commit
   them;
 * generated logs (:func:`mmreg.datasets.make_lidar_sequence`, 20 frames of 32 x 1024 rays,
-  at 10 Hz and 2 Hz, seeds 0 and 1): cars cruising, braking and passing, walkers, cyclists,
-  parked cars, with every object's id in every frame.
+  at 10 Hz and 2 Hz, seeds 0 and 1, and of 64 x 2048 rays at 10 Hz, an HDL-64's 113k points
+  a frame): cars cruising, braking and passing, walkers, cyclists, parked cars, with every
+  object's id in every frame.
 
 For each log, ``SequenceRegistration(random_state=0)`` (times from the log) and, with
 ``--pairs``, ``SweepRegistration(random_state=0)`` on every pair alone (its moving
@@ -141,8 +142,14 @@ def _speeds(ids, centres, times):
     return out
 
 
-def generated_log(frame_rate, seed):
-    log = make_lidar_sequence(20, frame_rate=frame_rate, random_state=seed)
+def generated_log(frame_rate, seed, beams=32):
+    log = make_lidar_sequence(
+        20,
+        frame_rate=frame_rate,
+        n_beams=beams,
+        n_azimuths=1024 if beams <= 32 else 2048,
+        random_state=seed,
+    )
     ids = [np.where(m, labels, 0) for labels, m in zip(log.labels, log.moving, strict=True)]
     speeds = []
     for k, labels in enumerate(log.labels):
@@ -262,7 +269,9 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="/work/data", help="folder of the nuScenes logs")
     parser.add_argument("--pairs", action="store_true", help="also each pair alone")
-    parser.add_argument("--generated", default="10:0,10:1,2:0,2:1", help="rate:seed,...")
+    parser.add_argument(
+        "--generated", default="10:0,10:1,2:0,2:1,10:0:64", help="rate:seed[:beams],..."
+    )
     parser.add_argument("--out", default=str(HERE / "results" / "sequences"))
     args = parser.parse_args(argv)
     logs = []
@@ -273,8 +282,10 @@ def main(argv=None):
         else:
             print(f"{folder}: absent, skipped", flush=True)
     for item in filter(None, args.generated.split(",")):
-        rate, seed = item.split(":")
-        logs.append((f"generated {rate} Hz, seed {seed}", generated_log(float(rate), int(seed))))
+        rate, seed, *beams = item.split(":")
+        beams = int(beams[0]) if beams else 32
+        name = f"generated {rate} Hz, " + (f"{beams} beams, " if beams != 32 else "")
+        logs.append((f"{name}seed {seed}", generated_log(float(rate), int(seed), beams)))
     header = (
         f"load average at start: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs), "
         f"python {sys.version.split()[0]}, numpy {np.__version__}"
