@@ -168,6 +168,7 @@ class Claim:
     rows: np.ndarray  # the points it claims: its evidence and the points consistent with it
     evidence: int  # how many more of them only its motion explains than only the ego's
     motion: np.ndarray  # 4 x 4, refined on them
+    shown: np.ndarray  # the rows only its motion explains (the evidence itself)
 
 
 def _thin(rows, size=_SAMPLE):
@@ -284,5 +285,5 @@ def track_claim(
         if np.median(departure) <= EXPLAINED_SPACINGS * np.median(spacing):
             continue
         rows = np.union1d(evidence, tight[on_tight.explained(refined)])
-        best = Claim(rows, score, refined)
+        best = Claim(rows, score, refined, evidence)
     return best

@@ -32,7 +32,7 @@ from sklearn.utils import Bunch
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_rows
 from mmreg._warnings import warn
-from mmreg.sweeps._explained import EXPLAINED_SPACINGS
+from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
 from mmreg.sweeps._islands import voxel_islands
@@ -90,6 +90,10 @@ _HIDDEN = 0.05
 _TRACK_POINTS = 2000
 # The places the ego motion leaves unexplained are islands of voxels this share of tau.
 _PLACE_CELL = 0.05
+# A piece of a claim (an island of its points) whose share of evidence is under this share
+# of the whole claim's is another body that the motion merely slides along itself (a
+# parked car beside a cyclist: 3 of its 573 points against 240 of the claim's 930).
+_PIECE_SHARE = 0.1
 # The body of a place left is sought this far around it (share of tau: a car's length).
 _BODY_SPAN = 1.0
 # Where no interval in seconds is known, a place reached lies this share of tau away at
@@ -696,6 +700,16 @@ class LogTracker:
         )
         if claim is not None:
             rows, motion = np.union1d(claim.rows, own), claim.motion
+            # A piece that the ego motion explains (a side sliding along itself) is the
+            # track's only where its evidence is on it too: a parked car beside a
+            # cyclist slides along itself under the cyclist's motion. (A piece the next
+            # sweep could not see holds no evidence either, but the ego motion does not
+            # explain it.)
+            sweep, tree, normals = frame.target()
+            ratio, _, _ = spacing_ratio(transform(pair.ego, first[rows]), tree, sweep, normals)
+            rows = _on_evidence(
+                first, rows, claim.shown, ratio <= EXPLAINED_SPACINGS, _PLACE_CELL * self.tau
+            )
         elif clusters and track.confirmed:
             rows, motion = own, max(clusters, key=lambda c: len(c[0]))[1]
         else:
@@ -1015,6 +1029,19 @@ def _fit_parameters(estimator):
 
 def _mask(values, n):
     return np.zeros(n, dtype=bool) if values is None else np.asarray(values, dtype=bool)
+
+
+def _on_evidence(points, rows, shown, still, cell):
+    """The ``rows`` but the islands (voxels of side ``cell``) of ``points[rows]`` that
+    the ego motion mostly explains (``still``: per row) and whose share of ``shown``
+    rows is under ``_PIECE_SHARE`` of the whole's."""
+    labels, n = voxel_islands(points[rows], cell)
+    held = np.isin(rows, shown)
+    sizes = np.bincount(labels, minlength=n)
+    share = np.bincount(labels, weights=held, minlength=n) / sizes
+    resting = np.bincount(labels, weights=still, minlength=n) / sizes > 0.5
+    other = resting & (share < _PIECE_SHARE * held.mean())
+    return rows[~other[labels]]
 
 
 def _sample(points, rng):
