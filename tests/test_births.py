@@ -21,6 +21,18 @@ def _target(points):
     return points, tree, SurfaceNormals(points, tree, 10)
 
 
+def _reached(first, second, ego):
+    """Per point of ``second``: whether ``first``, moved by ``ego``, leaves it unexplained
+    (a place reached)."""
+    _, new = moved_places(
+        second, np.arange(len(second)), np.linalg.inv(ego), _target(first), 0.01, None,
+        0.25, 0.25, 10,
+    )  # fmt: skip
+    reached = np.zeros(len(second), dtype=bool)
+    reached[new] = True
+    return reached
+
+
 FLOOR = _grid(np.arange(-2.0, 14.0, 0.1), np.arange(-6.0, 6.0, 0.1), [-1.5])
 BOX = _grid(np.arange(0.0, 0.5, 0.1), np.arange(0.0, 0.5, 0.1), np.arange(0.0, 1.0, 0.1))
 
@@ -66,12 +78,7 @@ def test_a_row_of_barriers_slid_by_one_period_lands_on_no_new_place():
     first = np.vstack([FLOOR, row])
     second = transform(ego, first)  # the same world, seen 3 m further on
     target = _target(second)
-    _, new = moved_places(
-        second, np.arange(len(second)), np.linalg.inv(ego), _target(first), 0.01, None,
-        0.25, 0.25, 10,
-    )  # fmt: skip
-    reached = np.zeros(len(second), dtype=bool)
-    reached[new] = True
+    reached = _reached(first, second, ego)
     one_period = to_matrix(np.eye(3), [-3.0 + 2.5, 0.0, 0.0])  # ego, then one barrier on
     assert new_place_share(first[len(FLOOR) :], one_period, target, reached) == 0.0
     # A box that drove 1 m into free space lands on places reached.
@@ -79,12 +86,7 @@ def test_a_row_of_barriers_slid_by_one_period_lands_on_no_new_place():
     second = np.vstack([second, transform(ego, box + [1.0, 0.0, 0.0])])
     first = np.vstack([first, box])
     target = _target(second)
-    _, new = moved_places(
-        second, np.arange(len(second)), np.linalg.inv(ego), _target(first), 0.01, None,
-        0.25, 0.25, 10,
-    )  # fmt: skip
-    reached = np.zeros(len(second), dtype=bool)
-    reached[new] = True
+    reached = _reached(first, second, ego)
     moved = ego @ to_matrix(np.eye(3), [1.0, 0.0, 0.0])
     assert new_place_share(box, moved, target, reached) > 0.9
 

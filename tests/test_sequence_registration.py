@@ -149,11 +149,12 @@ def test_a_parked_car_that_two_pairs_call_moving_stays_static(street):
         assert not est.moving_[k][car].any()
 
 
-def test_a_constant_velocity_cars_speed_is_measured_within_five_percent():
-    log = make_lidar_sequence(
+def _cruising_cars(n_moving):
+    """Six 10 Hz frames of ``n_moving`` cars cruising at 8 m/s, parked cars, nothing else."""
+    return make_lidar_sequence(
         6,
         frame_rate=10.0,
-        n_moving=1,
+        n_moving=n_moving,
         n_braking=0,
         n_overtaking=0,
         n_walkers=0,
@@ -163,6 +164,10 @@ def test_a_constant_velocity_cars_speed_is_measured_within_five_percent():
         n_azimuths=512,
         random_state=1,
     )
+
+
+def test_a_constant_velocity_cars_speed_is_measured_within_five_percent():
+    log = _cruising_cars(1)
     est = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
     car = next(i for i, kind in enumerate(log.kinds) if kind == "car")
     # The track that holds most of the car's points.
@@ -382,19 +387,7 @@ class _Blind(BaseEstimator):
 
 
 def test_movers_no_pair_detects_are_found_from_the_places_they_leave_and_reach(monkeypatch):
-    log = make_lidar_sequence(
-        6,
-        frame_rate=10.0,
-        n_moving=2,
-        n_braking=0,
-        n_overtaking=0,
-        n_walkers=0,
-        n_cyclists=0,
-        n_standing=0,
-        car_speed=8.0,
-        n_azimuths=512,
-        random_state=1,
-    )
+    log = _cruising_cars(2)
     cars = [i for i, kind in enumerate(log.kinds) if kind == "car"]
     est = SequenceRegistration(_Blind(random_state=0), random_state=0)
     est.fit(log.frames, times=log.times)
