@@ -950,3 +950,49 @@ def _hidden_mover_log(
     log.hidden = hidden
     log.mover = 2
     return log
+
+
+def _convoy_log(
+    n_frames=6,
+    *,
+    frame_rate=2.0,
+    ego_speed=8.0,
+    mover_speed=8.0,
+    n_beams=32,
+    n_azimuths=1024,
+    noise=0.0,
+    random_state=0,
+):
+    """A scripted log of two oncoming cars in a line, one frame's travel apart.
+
+    A straight street with buildings (drawn from ``random_state``), the sensor's car in
+    its lane and two cars alike (ids 1, the leader, and 2) in the nearer oncoming lane at
+    ``mover_speed``, the second ``(ego_speed + mover_speed) / frame_rate`` metres behind
+    the first: in each frame the second car stands, in the sensor's frame, where the first
+    stood in the frame before. A pair alone cannot tell the leader's motion from staying
+    put in the sensor's frame (moving with the sensor's car); the leader passes the
+    sensor in the middle of the log. Returns the Bunch of :func:`make_lidar_sequence`.
+    """
+    _check_count("n_frames", n_frames, 2)
+    road = _Road(0.0)
+    times = np.arange(n_frames) / frame_rate
+    gap = (ego_speed + mover_speed) / frame_rate
+    ego = _lane_track(road, "ego", "ego", _CAR, (_EGO_LANE, 1), (0.0, 0.0), ego_speed)
+    middle = times[-1] / 2
+    passing = ego_speed * middle  # where the leader passes the sensor
+    tracks = [
+        _lane_track(road, "car", "cruising", _CAR, (-_EGO_LANE, -1), (s, middle), mover_speed)
+        for s in (passing, passing + gap)
+    ]
+    rng = check_random_state(random_state)
+    street = _Street(times, ego)
+    _static_world(rng, road, street, -100.0, ego_speed * times[-1] + 100.0)
+    sensor = {
+        "frame_rate": frame_rate,
+        "height": 1.8,
+        "n_beams": n_beams,
+        "n_azimuths": n_azimuths,
+        "max_range": 60.0,
+        "noise": noise,
+    }
+    return _render(street.static, tracks, ego, times, sensor, rng)

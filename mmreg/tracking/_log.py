@@ -21,6 +21,7 @@ A frame's result is final ``lookahead`` frames later. Only the tracks and the pe
 frames are kept.
 """
 
+import functools
 import inspect
 from dataclasses import dataclass, field
 
@@ -684,22 +685,32 @@ class LogTracker:
         # small object (a walker of 20 points) a quarter of its points.
         needed = min_points // 2 if track.confirmed else min_points
         needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
-        claim = track_claim(
+        claim_from = functools.partial(
+            track_claim,
             first,
             near,
             tight,
-            starts,
-            pair.ego,
-            frame.target(),
-            pair.scale,
+            ego=pair.ego,
+            target=frame.target(),
+            scale=pair.scale,
             max_distance=0.2 * self.tau,
             min_evidence=needed,
             up=previous.up,
             view=frame.view(),
             margin=_HIDDEN * self.tau,
         )
+        claim = claim_from(starts)
+        fallback = claim is not None and not self._follows(
+            track, previous, frame, claim.rows, claim.motion
+        )
+        if fallback:
+            # Two cars in a line, one interval apart: the pair lays the first where the
+            # second will be, a motion that explains more points than the true one. The
+            # track's past says which: its prediction alone claims the points it
+            # explains (and the pair's cluster only where that motion explains it).
+            claim = claim_from(starts[: len(_SPEEDS)])
         if claim is not None:
-            rows, motion = np.union1d(claim.rows, own), claim.motion
+            rows, motion = claim.rows if fallback else np.union1d(claim.rows, own), claim.motion
             # A piece that the ego motion explains (a side sliding along itself) is the
             # track's only where its evidence is on it too: a parked car beside a
             # cyclist slides along itself under the cyclist's motion. (A piece the next
@@ -715,13 +726,19 @@ class LogTracker:
         else:
             return None
         # A track takes a detection only where its motion follows the track's.
-        world = compose(frame.pose, motion, inverse(previous.pose))
-        _, velocity = twist_of(world, transform(previous.pose, first[rows]).mean(axis=0), dt)
-        if not consistent_motion(track, velocity, dt, _MOTION_TOLERANCE * self.tau):
+        if not self._follows(track, previous, frame, rows, motion):
             return None
         if not self._possible(previous, rows, motion, dt):
             return None
         return rows, motion
+
+    def _follows(self, track, previous, frame, rows, motion):
+        """Whether ``motion`` of ``previous``'s points ``rows`` follows ``track``'s."""
+        dt = frame.time - previous.time
+        world = compose(frame.pose, motion, inverse(previous.pose))
+        points = transform(previous.pose, previous.returns[rows])
+        _, velocity = twist_of(world, points.mean(axis=0), dt)
+        return consistent_motion(track, velocity, dt, _MOTION_TOLERANCE * self.tau)
 
     def _observe(self, track, previous, frame, rows, motion, dt):
         """``track`` seen at ``rows`` of ``previous``, moving by ``motion`` to ``frame``."""
