@@ -700,17 +700,16 @@ class LogTracker:
             margin=_HIDDEN * self.tau,
         )
         claim = claim_from(starts)
-        fallback = claim is not None and not self._follows(
+        if claim is not None and not self._follows(
             track, previous, frame, claim.rows, claim.motion
-        )
-        if fallback:
+        ):
             # Two cars in a line, one interval apart: the pair lays the first where the
             # second will be, a motion that explains more points than the true one. The
-            # track's past says which: its prediction alone claims the points it
-            # explains (and the pair's cluster only where that motion explains it).
+            # track's past says which motion: its prediction tries alone. The pair's
+            # clusters over the prediction are still the object's points.
             claim = claim_from(starts[: len(_SPEEDS)])
         if claim is not None:
-            rows, motion = claim.rows if fallback else np.union1d(claim.rows, own), claim.motion
+            rows, motion = np.union1d(claim.rows, own), claim.motion
             # A piece that the ego motion explains (a side sliding along itself) is the
             # track's only where its evidence is on it too: a parked car beside a
             # cyclist slides along itself under the cyclist's motion. (A piece the next
