@@ -928,18 +928,8 @@ def _hidden_mover_log(
         _lane_track(road, "van", "cruising", van, (van_lane, 1), (0.0, 0.0), ego_speed),
         _lane_track(road, "car", "cruising", _CAR, (mover_lane, -1), passing, mover_speed),
     ]
-    rng = check_random_state(random_state)
-    street = _Street(times, ego)
-    _static_world(rng, road, street, -100.0, ego_speed * times[-1] + 100.0)
-    sensor = {
-        "frame_rate": frame_rate,
-        "height": 1.8,
-        "n_beams": n_beams,
-        "n_azimuths": n_azimuths,
-        "max_range": 60.0,
-        "noise": noise,
-    }
-    log = _render(street.static, tracks, ego, times, sensor, rng)
+    sensor = {"frame_rate": frame_rate, "n_beams": n_beams, "n_azimuths": n_azimuths}
+    log = _scripted_street(road, tracks, ego, times, sensor | {"noise": noise}, random_state)
     hidden = np.arange(n_before, n_before + n_hidden)
     seen = log.objects.loc[log.objects["id"] == 2, "n_points"].to_numpy()
     if (seen[hidden] > 0).any() or (np.delete(seen, hidden) == 0).any():
@@ -984,15 +974,17 @@ def _convoy_log(
         _lane_track(road, "car", "cruising", _CAR, (-_EGO_LANE, -1), (s, middle), mover_speed)
         for s in (passing, passing + gap)
     ]
+    sensor = {"frame_rate": frame_rate, "n_beams": n_beams, "n_azimuths": n_azimuths}
+    return _scripted_street(road, tracks, ego, times, sensor | {"noise": noise}, random_state)
+
+
+def _scripted_street(road, tracks, ego, times, sensor, random_state):
+    """A scripted log: ``tracks`` and the sensor's car ``ego`` on ``road``, between buildings
+    drawn from ``random_state`` 100 m beyond the drive either way, ray cast at ``times`` by
+    a sensor 1.8 m up that sees 60 m (``sensor``: frame_rate, n_beams, n_azimuths, noise)."""
     rng = check_random_state(random_state)
     street = _Street(times, ego)
-    _static_world(rng, road, street, -100.0, ego_speed * times[-1] + 100.0)
-    sensor = {
-        "frame_rate": frame_rate,
-        "height": 1.8,
-        "n_beams": n_beams,
-        "n_azimuths": n_azimuths,
-        "max_range": 60.0,
-        "noise": noise,
-    }
+    x, *_ = ego.state(times)
+    _static_world(rng, road, street, x[0] - 100.0, x[-1] + 100.0)
+    sensor = {"height": 1.8, "max_range": 60.0} | sensor
     return _render(street.static, tracks, ego, times, sensor, rng)
