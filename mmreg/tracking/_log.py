@@ -671,15 +671,15 @@ class LogTracker:
         near = np.union1d(near_points(first, points, radius, np.flatnonzero(free)), own)
         tight = np.union1d(near_points(first, points, _TIGHT * self.tau, near), own)
         # The prediction, the same twist slower or faster (a car brakes at a light,
-        # pulls away), and the clusters' own motions: each a start for the track's ICP.
-        starts = [
+        # pulls away): starts for the track's ICP, with the clusters' own motions.
+        predicted = [
             compose(
                 inverse(frame.pose),
                 predicted_motion(track.omega, track.velocity, centre, dt * speed),
                 previous.pose,
             )
             for speed in _SPEEDS
-        ] + [motion for _, motion in clusters]
+        ]
         min_points = self.min_points
         # A confirmed track needs less new evidence (its past shows it moves), and a
         # small object (a walker of 20 points) a quarter of its points.
@@ -699,15 +699,18 @@ class LogTracker:
             view=frame.view(),
             margin=_HIDDEN * self.tau,
         )
-        claim = claim_from(starts)
-        if claim is not None and not self._follows(
-            track, previous, frame, claim.rows, claim.motion
+        claim = claim_from(predicted + [motion for _, motion in clusters])
+        if (
+            clusters
+            and claim is not None
+            and not self._follows(track, previous, frame, claim.rows, claim.motion)
         ):
             # Two cars in a line, one interval apart: the pair lays the first where the
             # second will be, a motion that explains more points than the true one. The
-            # track's past says which motion: its prediction tries alone. The pair's
-            # clusters over the prediction are still the object's points.
-            claim = claim_from(starts[: len(_SPEEDS)])
+            # track's past says which motion: its prediction tries alone (without
+            # clusters it just did). The pair's clusters over the prediction are still
+            # the object's points.
+            claim = claim_from(predicted)
         if claim is not None:
             rows, motion = np.union1d(claim.rows, own), claim.motion
             # A piece that the ego motion explains (a side sliding along itself) is the
