@@ -333,8 +333,9 @@ def test_each_frame_s_state_is_computed_once(monkeypatch):
         made = [key for key in calls if key[0] == name]
         assert len(made) >= len(log.frames)
     made = [key for key in calls if key[0] == "cKDTree" and key[1] in whole]
-    # One tree of every frame that is some pair's second sweep, which the tracks share.
-    assert len(made) == len(log.frames) - 1
+    # One tree of every frame that is some pair's second sweep, which the tracks share;
+    # the first frame's too where a claim reads its surface normals.
+    assert len(log.frames) - 1 <= len(made) <= len(log.frames)
 
 
 def test_thinned_to_voxels_every_point_takes_its_voxel_s_labels(street):

@@ -25,8 +25,11 @@ _SAMPLE = 500
 _REFINED_STARTS = 2
 # Evidence must exceed this many times the counter-evidence.
 _AGAINST = 2
+# A surface whose normal lies within about 26 degrees of the vertical (the absolute
+# cosine above this) is level: a road user's level motion slides it along itself.
+LEVEL_COSINE = 0.9
 
-__all__ = ["Claim", "claimed_points", "near_points", "track_claim"]
+__all__ = ["Claim", "claimed_points", "near_points", "on_level", "track_claim"]
 
 
 def near_points(points, where, radius, candidates=None):
@@ -161,6 +164,29 @@ class _Answers:
         return claimed
 
 
+def on_level(surface, rows, up):
+    """Whether the points ``rows`` lie on level surfaces: their normals (``surface``, a
+    :class:`~mmreg.sweeps._icp.SurfaceNormals`) within about 26 degrees of ``up``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.spatial import cKDTree
+    >>> from mmreg.sweeps._icp import SurfaceNormals
+    >>> from mmreg.tracking._evidence import on_level
+    >>> g = np.arange(0.0, 1.0, 0.1)
+    >>> floor = np.stack(np.meshgrid(g, g, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    >>> wall = floor[:, [2, 0, 1]] + [2.0, 0.0, 0.0]
+    >>> points = np.vstack([floor, wall])
+    >>> tree = cKDTree(points)
+    >>> level = on_level(SurfaceNormals(points, tree, 10), [0, 150], np.array([0, 0, 1.0]))
+    >>> level.tolist()
+    [True, False]
+    """
+    normal, _, _ = surface(np.asarray(rows, dtype=np.intp))
+    return np.abs(normal @ up) > LEVEL_COSINE
+
+
 @dataclass
 class Claim:
     """What a track's motion claims in a pair (see :func:`track_claim`)."""
@@ -192,6 +218,7 @@ def track_claim(
     up=None,
     view=None,
     margin=0.0,
+    surface=None,
 ):
     """The points a track's motion claims in a pair, and the motion refined on them.
 
@@ -207,8 +234,13 @@ def track_claim(
     that stopped does not). ``up``: the vertical of z-up sweeps, along which a road
     user's motion is kept level (:mod:`mmreg.sweeps._level_icp`); None: free.
     ``view`` and ``margin``: the second sweep's range image; points it could not have
-    seen are no evidence either way (see :func:`claimed_points`). Returns a
-    :class:`Claim` or None.
+    seen are no evidence either way (see :func:`claimed_points`). ``surface``: the
+    first sweep's :class:`~mmreg.sweeps._icp.SurfaceNormals`; with ``up``, points on
+    level surfaces (:func:`on_level`) are no evidence. A level motion slides a level
+    surface along itself, and a motion that keeps the ground's scan rings where the
+    sensor is explains them better than the ego motion, which lays them between the
+    next sweep's rings (a ghost that drives with the sensor). Returns a :class:`Claim`
+    or None.
     """
     if len(near) < min_evidence:
         return None
@@ -268,9 +300,12 @@ def track_claim(
             refined_motions.append(refined)
     on_near = _Answers(points[near], target, scale, view, margin)
     on_tight = _Answers(points[tight], target, scale)
+    sliding = np.zeros(len(near), dtype=bool)
+    if up is not None and surface is not None:
+        sliding = on_level(surface, near, up)
     best = None
     for refined in refined_motions:
-        claimed = on_near.claimed(refined, ego)
+        claimed = on_near.claimed(refined, ego) & ~sliding
         evidence = near[claimed]
         # Noise leaves a few points of a still object unexplained at rest, which a
         # small motion explains: as many as that motion leaves unexplained that the

@@ -41,7 +41,7 @@ from mmreg.sweeps._level_icp import level_icp, level_part
 from mmreg.sweeps._motion_bounds import impossible_motions, max_travel
 from mmreg.sweeps._new_places import MIN_NEW_PLACE
 from mmreg.tracking._births import moved_places, new_place_share, place_starts
-from mmreg.tracking._evidence import near_points, track_claim
+from mmreg.tracking._evidence import near_points, on_level, track_claim
 from mmreg.tracking._motion import (
     compose,
     inverse,
@@ -435,6 +435,7 @@ class LogTracker:
                 up=previous.up,
                 view=frame.view(),
                 margin=margin,
+                surface=previous.target()[2],
             )
             if claim is None or not self._possible(previous, claim.rows, claim.motion, dt):
                 continue
@@ -442,8 +443,9 @@ class LogTracker:
             landed = new_place_share(first[claim.rows], claim.motion, frame.target(), arrived)
             if landed < MIN_NEW_PLACE:
                 continue
-            free[claim.rows] = False
-            found.append((claim.rows, claim.motion))
+            rows = _off_the_ground(previous, claim.rows, claim.shown, _TIGHT * self.tau)
+            free[rows] = False
+            found.append((rows, claim.motion))
         return found
 
     def _body_of(self, points, rows, free, cell):
@@ -698,6 +700,7 @@ class LogTracker:
             up=previous.up,
             view=frame.view(),
             margin=_HIDDEN * self.tau,
+            surface=previous.target()[2],
         )
         claim = claim_from(predicted + [motion for _, motion in clusters])
         if (
@@ -723,6 +726,7 @@ class LogTracker:
             rows = _on_evidence(
                 first, rows, claim.shown, ratio <= EXPLAINED_SPACINGS, _PLACE_CELL * self.tau
             )
+            rows = _off_the_ground(previous, rows, claim.shown, _TIGHT * self.tau)
         elif clusters and track.confirmed:
             rows, motion = own, max(clusters, key=lambda c: len(c[0]))[1]
         else:
@@ -859,6 +863,7 @@ class LogTracker:
                 up=frame.up,
                 view=later.view(),
                 margin=_HIDDEN * self.tau,
+                surface=frame.target()[2],
             )
             if claim is None or not self._possible(frame, claim.rows, claim.motion, dt):
                 return
@@ -1061,6 +1066,27 @@ def _on_evidence(points, rows, shown, still, cell):
     resting = np.bincount(labels, weights=still, minlength=n) / sizes > 0.5
     other = resting & (share < _PIECE_SHARE * held.mean())
     return rows[~other[labels]]
+
+
+def _off_the_ground(frame, rows, shown, margin):
+    """``rows`` of ``frame`` but the ground beneath a road user: in a z-up sweep, the
+    level points no higher than ``margin`` above its lowest evidence (``shown``, its
+    upright points).
+
+    The ground around a walker's feet that the ground segmentation left joins its claim:
+    the walker's level motion slides it along itself, and where the walker's shadow hid
+    it from the next sweep it reads as evidence too. A car's roof and bonnet are level
+    but stand above its lowest evidence.
+    """
+    if frame.up is None or not len(rows):
+        return rows
+    level = on_level(frame.target()[2], rows, frame.up)
+    upright = np.isin(rows, shown) & ~level
+    if not upright.any():
+        return rows
+    height = frame.returns[rows] @ frame.up
+    beneath = level & (height <= height[upright].min() + margin)
+    return rows[~beneath]
 
 
 def _sample(points, rng):
