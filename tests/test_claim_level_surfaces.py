@@ -45,7 +45,6 @@ def _claim(thing, rng, surface):
     start = np.eye(4)
     start[0, 3] = _SHIFT
     near = np.arange(len(floor), len(first))
-    first_tree = cKDTree(first)
     return len(floor), track_claim(
         first,
         near,
@@ -57,7 +56,7 @@ def _claim(thing, rng, surface):
         max_distance=1.0,
         min_evidence=20,
         up=_UP,
-        surface=SurfaceNormals(first, first_tree, 10) if surface else None,
+        surface=SurfaceNormals(first, cKDTree(first), 10) if surface else None,
     )
 
 
@@ -66,7 +65,7 @@ def test_a_level_plate_sliding_along_itself_is_no_evidence(seed):
     # A plate 0.4 m above the floor moves 1.5 m along itself: only its level points
     # say so, 0.4 m (four spacings) above the floor where it was.
     plate = _grid([0.0, 0.0, 0.4], [1.0, 1.0, 0.4], 0.1)
-    n_floor, claim = _claim(plate, np.random.default_rng(seed), surface=False)
+    _, claim = _claim(plate, np.random.default_rng(seed), surface=False)
     assert claim is not None and len(claim.shown) == len(plate)  # without the normals
     _, claim = _claim(plate, np.random.default_rng(seed), surface=True)
     assert claim is None
