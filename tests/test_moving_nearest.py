@@ -18,6 +18,7 @@ import mmreg.sweeps._icp as icp
 from mmreg import MultiModelRegistration, SweepRegistration
 from mmreg._array.moving_nearest import MovingNearest
 from mmreg._array.point_memo import PointMemo
+from mmreg._array.point_tree import PointTree
 
 
 class _PlainNearest:
@@ -35,14 +36,15 @@ class _PlainNearest:
     on_grid=st.booleans(),
     step=st.sampled_from([1e-4, 1e-2, 0.3]),
     bound=st.sampled_from([0.2, 1.0, np.inf]),
+    make_tree=st.sampled_from([cKDTree, PointTree]),
 )
-def test_moving_points_get_the_tree_s_nearest_point(seed, on_grid, step, bound):
+def test_moving_points_get_the_tree_s_nearest_point(seed, on_grid, step, bound, make_tree):
     rng = np.random.default_rng(seed)
     if on_grid:  # many equidistant target points: ties the tree must break itself
         target = rng.integers(0, 6, size=(300, 3)) * 0.25
     else:
         target = rng.uniform(0, 2, size=(300, 3))
-    tree = cKDTree(target)
+    tree = make_tree(target)
     x = rng.uniform(-0.2, 2.2, size=(80, 3))
     nearest = MovingNearest(tree, len(x), bound)
     gate = np.full(len(x), 0.7 * bound if np.isfinite(bound) else 10.0)

@@ -312,7 +312,7 @@ def test_each_frame_s_state_is_computed_once(monkeypatch):
     for module, name in (
         (sweep_state, "ground_mask"),
         (sweep_state, "voxel_islands"),
-        (sweep_state, "cKDTree"),
+        (sweep_state, "PointTree"),
         (sequence, "cKDTree"),
     ):
         original = getattr(module, name)
@@ -327,12 +327,13 @@ def test_each_frame_s_state_is_computed_once(monkeypatch):
     whole = {f.tobytes() for f in log.frames}
     SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
     # Nothing of a sweep's state is made twice from the same points.
-    state = {key: n for key, n in calls.items() if key[0] != "cKDTree" or key[1] in whole}
+    trees = ("PointTree", "cKDTree")
+    state = {key: n for key, n in calls.items() if key[0] not in trees or key[1] in whole}
     assert state and max(state.values()) == 1
     for name in ("ground_mask", "voxel_islands"):
         made = [key for key in calls if key[0] == name]
         assert len(made) >= len(log.frames)
-    made = [key for key in calls if key[0] == "cKDTree" and key[1] in whole]
+    made = [key for key in calls if key[0] in trees and key[1] in whole]
     # One tree of every frame that is some pair's second sweep, which the tracks share;
     # the first frame's too where a claim reads its surface normals.
     assert len(log.frames) - 1 <= len(made) <= len(log.frames)

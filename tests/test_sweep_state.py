@@ -80,7 +80,7 @@ def _log(frames, states=None):
     return fits
 
 
-COUNTED = ("ground_mask", "voxel_islands", "cKDTree", "SurfaceNormals", "fine_cloud")
+COUNTED = ("ground_mask", "voxel_islands", "PointTree", "SurfaceNormals", "fine_cloud")
 
 
 def test_each_frame_is_computed_once(monkeypatch):
@@ -99,7 +99,7 @@ def test_each_frame_is_computed_once(monkeypatch):
     # sweep whole, and off the ground), a fine cloud per point set and centre.
     for name in COUNTED:
         assert len(set(calls[name])) == len(calls[name]), name
-    assert len(calls["cKDTree"]) <= 2 * len(frames)
+    assert len(calls["PointTree"]) <= 2 * len(frames)
     # Independent fits compute the middle frames twice.
     independent = {}
     for name in COUNTED:

@@ -14,8 +14,8 @@ subset asked for twice is computed once.
 """
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from mmreg._array.point_tree import PointTree
 from mmreg.sweeps._ego_motion import fine_cloud
 from mmreg.sweeps._ground import ground_mask, has_ground, is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -71,8 +71,9 @@ class SweepState:
     # -------------------------------------------------------------- neighbourhoods
     @property
     def tree(self):
-        """The cKDTree of the points."""
-        return self._cached("tree", lambda: cKDTree(self.points))
+        """The k-d tree of the points (a :class:`~mmreg._array.point_tree.PointTree`:
+        ``cKDTree``'s interface, twice its speed on nearest-point queries)."""
+        return self._cached("tree", lambda: PointTree(self.points))
 
     @property
     def normals(self):
