@@ -26,6 +26,13 @@ _MIN_MATCHES = 8  # three unknowns, and a margin
 _ANNEAL = 0.7  # the kernel's scale shrinks by this factor per step, to the robust one
 
 
+def _cross_up(up, vectors):
+    """``np.cross(up, vectors)`` for one vector ``up`` and rows ``vectors``, computed as
+    numpy computes it (the same floats) without its broadcasting's cost."""
+    x, y, z = vectors[:, 0], vectors[:, 1], vectors[:, 2]
+    return np.stack([up[1] * z - up[2] * y, up[2] * x - up[0] * z, up[0] * y - up[1] * x], axis=1)
+
+
 def _turn(angle, up):
     """Rotation by ``angle`` about the unit vector ``up`` (Rodrigues)."""
     cross = np.array([[0.0, -up[2], up[1]], [up[2], 0.0, -up[0]], [-up[1], up[0], 0.0]])
@@ -173,7 +180,7 @@ def level_icp(
         # road, and a free height would take up the ego motion's own error in it.
         centre = moved[rows].mean(axis=0)
         n_first = n @ rotation_e  # the normals in the first sweep's frame
-        arm = np.cross(up, moved[rows] - centre)
+        arm = _cross_up(up, moved[rows] - centre)
         shifts = n_first @ across.T
         if turn:
             jacobian = np.column_stack([np.einsum("ni,ni->n", n_first, arm), shifts])
@@ -191,8 +198,7 @@ def level_icp(
         update[:3, :3] = rotation
         update[:3, 3] = centre + shift @ across - rotation @ centre
         level = update @ level
-        if np.linalg.norm(shift) + abs(angle) * np.linalg.norm(arm, axis=1).max() < (
-            1e-4 * max_distance
-        ):
+        reach = np.sqrt(np.add.reduce(arm * arm, axis=1).max())  # the farthest point's arm
+        if np.linalg.norm(shift) + abs(angle) * reach < (1e-4 * max_distance):
             break
     return LevelFit(ego @ level, robust)

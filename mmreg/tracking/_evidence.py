@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from mmreg._array.geometry import rows_in_box
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_at
 from mmreg.sweeps._icp import multi_body_icp
 from mmreg.sweeps._level_icp import level_icp, level_part
@@ -48,7 +49,7 @@ def near_points(points, where, radius, candidates=None):
     if not len(where) or not len(candidates):
         return np.zeros(0, dtype=np.intp)
     low, high = where.min(axis=0) - radius, where.max(axis=0) + radius
-    box = candidates[np.all((points[candidates] >= low) & (points[candidates] <= high), axis=1)]
+    box = rows_in_box(points, low, high, candidates)
     if not len(box):
         return box
     distance, _ = cKDTree(where).query(points[box], distance_upper_bound=radius)

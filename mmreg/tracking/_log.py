@@ -30,6 +30,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 from sklearn.utils import Bunch
 
+from mmreg._array.geometry import rows_in_box
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_rows
 from mmreg._warnings import warn
@@ -454,7 +455,8 @@ class LogTracker:
         moved less than its length, only its rear is a place left)."""
         low = points[rows].min(axis=0) - _BODY_SPAN * self.tau
         high = points[rows].max(axis=0) + _BODY_SPAN * self.tau
-        around = np.flatnonzero(free & np.all((points >= low) & (points <= high), axis=1))
+        around = rows_in_box(points, low, high)
+        around = around[free[around]]
         labels, _ = voxel_islands(points[around], cell)
         holding = np.isin(around, rows)
         return around[np.isin(labels, np.unique(labels[holding]))]
