@@ -4,7 +4,8 @@ A pair's registration and a log's tracks ask one sweep's tree for the nearest po
 hundreds of thousands of moved points a frame (ICP, surface normals, the explained
 tests). small_gicp's tree (nanoflann) answers those queries about twice as fast as
 scipy's ``cKDTree`` on one thread (k = 1: 13 against 25 ms for 35k points of a nuScenes
-sweep; k = 10: 29 against 52 ms), and finds the same distances. :class:`PointTree`
+sweep; k = 10: 29 against 52 ms). Its distances are scipy's to rounding (small_gicp
+sums the squares in another order: an ulp apart in one of eight). :class:`PointTree`
 speaks ``cKDTree``'s language, so that the code that reads a tree stays as it is: its
 ``query`` is served by small_gicp where small_gicp is installed, and everything else
 (``query_ball_point``, ``sparse_distance_matrix``, ...) by a ``cKDTree`` built when
@@ -37,7 +38,9 @@ class PointTree:
     Notes
     -----
     Where several points are as near, which one a query lists may differ from
-    ``cKDTree``'s; the distances are the same. A tree pickles (its engine is rebuilt
+    ``cKDTree``'s, and a distance may differ from scipy's in its last bit: where
+    exact equality with scipy matters (the robust EM's neighbour table), use
+    ``cKDTree``. A tree pickles (its engine is rebuilt
     when it is next queried).
 
     Examples
