@@ -13,6 +13,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from mmreg._array.geometry import column_bounds, rotation_angle
 from mmreg._array.neighbors import NeighbourTable
+from mmreg._array.point_tree import PointTree
 from mmreg._array.voxels import voxel_representatives, voxel_sample
 from mmreg._validation import check_ego_motion, check_labels, check_paired, invalid_rows
 from mmreg._warnings import warn
@@ -588,7 +589,10 @@ class MultiModelRegistration(BaseRegistration):
         # The robust variants' neighbour table, listed once for the initial clusters too.
         neighbours = None
         if self.variant != "paper" and reads_neighbours(self.skip_steps):
-            table = functools.partial(NeighbourTable, a, workers=workers)
+            # SweepRegistration's rounds (a memo) list a sweep's points: on small_gicp's
+            # tree, in half the time. Other inputs keep scipy's exact distances.
+            tree = cKDTree if memo is None or a.shape[1] != 3 else PointTree
+            table = functools.partial(NeighbourTable, a, workers=workers, tree=tree)
             neighbours = table() if memo is None else memo.get(("table", workers), a, table)
         # Before any warning about tau: two sweeps stacked row by row are no input at all.
         known = neighbours is not None and neighbours.k > 1
