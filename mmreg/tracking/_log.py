@@ -910,8 +910,10 @@ class LogTracker:
         def ids(keys):
             if keys is None:
                 return np.zeros(n_valid, dtype=np.intp)
-            names = {int(k): self._identity(int(k)) for k in np.unique(keys)}
-            return np.array([names[int(k)] for k in keys], dtype=np.intp).reshape(-1)
+            keys = np.asarray(keys).reshape(-1)
+            unique, inverse = np.unique(keys, return_inverse=True)
+            names = np.array([self._identity(int(k)) for k in unique], dtype=np.intp)
+            return names[inverse.reshape(-1)]
 
         # A few points (fewer than the smallest object) on which a track that no pair
         # sees after this frame ends are what it left behind as it went out of view or
