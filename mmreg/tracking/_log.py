@@ -360,10 +360,24 @@ class LogTracker:
             seen[track.key] = len(rows)
             for j in mine:
                 del detections[j]
-        # Moving clusters no track holds: tentative tracks.
-        for rows, motion in detections.values():
+        # Moving clusters no track holds: tentative tracks. One over the prediction of a
+        # confirmed track that this pair missed is that object, seen with another motion
+        # (a car leaving the view, whose pair's motion follows its last visible part).
+        heirs = set()
+        for j, (rows, motion) in detections.items():
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
+            missed = [
+                i
+                for i in order
+                if tracks[i].confirmed
+                and tracks[i].key not in seen
+                and tracks[i].key not in heirs
+                and overlap[column[j], i] >= _MIN_OVERLAP
+            ]
+            if missed:
+                track.heir_of = tracks[max(missed, key=lambda i: overlap[column[j], i])].key
+                heirs.add(track.heir_of)
         # Objects the pair's clusters called static that left a place and reached one.
         for rows, motion in self._moved_places(previous, frame, pair, free, dt):
             track = self._born(previous, frame, rows, motion, dt)
@@ -796,13 +810,17 @@ class LogTracker:
         """Confirm the tentative tracks seen twice; coast the others, ending those that
         missed too many frames (a tentative one at its first miss)."""
         state = self._state
-        alive, confirmed = [], []
+        alive, confirmed, ended = [], [], set()
         for track in state.tracks:
             if track.key in seen:
                 state.last_seen[track.key] = previous.index
                 if not track.confirmed and track.hits >= 2:
-                    state.n_confirmed += 1
-                    track.identity = state.n_confirmed
+                    track.identity = self._inherited(track, seen)
+                    if track.identity:
+                        ended.add(track.heir_of)
+                    else:
+                        state.n_confirmed += 1
+                        track.identity = state.n_confirmed
                     state.identity[track.key] = track.identity
                     confirmed.append(track)
                 previous.rows.append(
@@ -820,8 +838,17 @@ class LogTracker:
                 if track.misses > (self.max_misses if track.confirmed else 0):
                     continue
             alive.append(track)
-        state.tracks = alive
+        state.tracks = [track for track in alive if track.key not in ended]
         return confirmed
+
+    def _inherited(self, track, seen):
+        """The id ``track`` goes on with, or 0: that of the confirmed track it was born
+        over when a pair missed that one (:attr:`Track.heir_of`), if that one has not
+        been seen since (``seen``: the tracks seen in this pair); that track then ends."""
+        old = track.heir_of
+        if old < 0 or old in seen or self._seen(old) >= track.first_frame:
+            return 0
+        return self._identity(old)
 
     def _extend_back(self, track, latest):
         """A newly confirmed track's points in the frames before its first detection,

@@ -34,6 +34,9 @@ class Track:
     misses: int = 0
     identity: int = 0  # the public id, given when confirmed
     first_frame: int = -1  # the earliest frame it has points in (-1: its first frame)
+    # The confirmed track that missed, in the pair this one was born in, the cluster it was
+    # born on over its prediction (-1: none): confirmed, this one goes on with its id.
+    heir_of: int = -1
 
     def __post_init__(self):
         if self.first_frame < 0:
