@@ -313,7 +313,7 @@ def track_claim(
         # ego motion explains. A moving object's evidence outweighs its counter-evidence.
         against = np.count_nonzero(on_near.claimed(ego, refined))
         score = len(evidence) - _AGAINST * against
-        if score < min_evidence or (best is not None and score <= best.evidence):
+        if score < min_evidence:
             continue
         moved = on_near.moved(refined)[0][claimed]
         spacing = on_near.moved(refined)[1][2][claimed]
@@ -321,5 +321,8 @@ def track_claim(
         if np.median(departure) <= EXPLAINED_SPACINGS * np.median(spacing):
             continue
         rows = np.union1d(evidence, tight[on_tight.explained(refined)])
-        best = Claim(rows, score, refined, evidence)
+        # A long side sliding along itself (the aperture problem) fits several shifts
+        # with like evidence; the true one explains the whole body, ends included.
+        if best is None or (len(rows), score) > (len(best.rows), best.evidence):
+            best = Claim(rows, score, refined, evidence)
     return best
