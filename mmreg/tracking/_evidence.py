@@ -229,10 +229,12 @@ def track_claim(
     start, the evidence is the points of ``near`` that the motion explains on the second
     sweep and the ego motion does not; the motion is refined by a point-to-plane ICP
     (Tukey's kernel) on them and on the points of ``tight`` it explains (a car's side
-    that slides along itself is no evidence, but it is the car's). The refined motion
-    with the most evidence wins, if it has ``min_evidence`` points and moves them more
-    than two of the second sweep's spacings from where the ego motion puts them (a car
-    that stopped does not). ``up``: the vertical of z-up sweeps, along which a road
+    that slides along itself is no evidence, but it is the car's). Of the refined motions
+    with ``min_evidence`` points that move them more than two of the second sweep's
+    spacings from where the ego motion puts them (a car that stopped does not), the one
+    that explains the most points (its evidence and the points of ``tight``) wins, then
+    the one with the most evidence: a long side with a repeated structure fits shifts a
+    period apart with like evidence, and only the whole body tells them apart. ``up``: the vertical of z-up sweeps, along which a road
     user's motion is kept level (:mod:`mmreg.sweeps._level_icp`); None: free.
     ``view`` and ``margin``: the second sweep's range image; points it could not have
     seen are no evidence either way (see :func:`claimed_points`). ``surface``: the
