@@ -234,8 +234,9 @@ def track_claim(
     spacings from where the ego motion puts them (a car that stopped does not), the one
     that explains the most points (its evidence and the points of ``tight``) wins, then
     the one with the most evidence: a long side with a repeated structure fits shifts a
-    period apart with like evidence, and only the whole body tells them apart. ``up``: the vertical of z-up sweeps, along which a road
-    user's motion is kept level (:mod:`mmreg.sweeps._level_icp`); None: free.
+    period apart with like evidence, and only the whole body tells them apart. ``up``:
+    the vertical of z-up sweeps, along which a road user's motion is kept level
+    (:mod:`mmreg.sweeps._level_icp`); None: free.
     ``view`` and ``margin``: the second sweep's range image; points it could not have
     seen are no evidence either way (see :func:`claimed_points`). ``surface``: the
     first sweep's :class:`~mmreg.sweeps._icp.SurfaceNormals`; with ``up``, points on
