@@ -115,10 +115,11 @@ class PointTree:
         ``p=2`` run on small_gicp's tree (``workers``: its threads, -1 every core);
         any other query on scipy's.
         """
-        engine = self._small_gicp()
         x = np.asarray(x, dtype=np.float64)
         plain = isinstance(k, (int, np.integer)) and k >= 1 and eps == 0 and p == 2
-        if engine is None or not plain or x.ndim != 2 or x.shape[1] != 3 or not len(x):
+        plain = plain and x.ndim == 2 and x.shape[1] == 3 and len(x) > 0
+        engine = self._small_gicp() if plain else None
+        if engine is None:
             return self.scipy_tree.query(
                 x, k=k, eps=eps, p=p, distance_upper_bound=distance_upper_bound, workers=workers
             )

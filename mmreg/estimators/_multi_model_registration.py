@@ -591,7 +591,7 @@ class MultiModelRegistration(BaseRegistration):
         if self.variant != "paper" and reads_neighbours(self.skip_steps):
             # SweepRegistration's rounds (a memo) list a sweep's points: on small_gicp's
             # tree, in half the time. Other inputs keep scipy's exact distances.
-            tree = cKDTree if memo is None or a.shape[1] != 3 else PointTree
+            tree = cKDTree if memo is None else PointTree
             table = functools.partial(NeighbourTable, a, workers=workers, tree=tree)
             neighbours = table() if memo is None else memo.get(("table", workers), a, table)
         # Before any warning about tau: two sweeps stacked row by row are no input at all.

@@ -937,10 +937,9 @@ class LogTracker:
         def ids(keys):
             if keys is None:
                 return np.zeros(n_valid, dtype=np.intp)
-            keys = np.asarray(keys).reshape(-1)
-            unique, inverse = np.unique(keys, return_inverse=True)
+            unique, inverse = np.unique(np.ravel(keys), return_inverse=True)
             names = np.array([self._identity(int(k)) for k in unique], dtype=np.intp)
-            return names[inverse.reshape(-1)]
+            return names[inverse]
 
         # A few points (fewer than the smallest object) on which a track that no pair
         # sees after this frame ends are what it left behind as it went out of view or

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mmreg._array.geometry import rows_in_box
 from mmreg.tracking._motion import predicted_motion, transform, twist_of
 
 __all__ = ["Track", "consistent_motion", "overlap_matrix"]
@@ -95,8 +96,8 @@ def overlap_matrix(detections, predictions, radii):
         tree = cKDTree(where)
         low, high = where.min(axis=0) - radius, where.max(axis=0) + radius
         for i, points in enumerate(detections):
-            inside = np.all((points >= low) & (points <= high), axis=1)
-            if not inside.any():
+            inside = rows_in_box(points, low, high)
+            if not len(inside):
                 continue
             distance, _ = tree.query(points[inside], distance_upper_bound=radius)
             table[i, j] = np.count_nonzero(np.isfinite(distance)) / len(points)
