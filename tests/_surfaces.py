@@ -11,3 +11,9 @@ def area_weighted_box(center, size, n, rng):
     points = rng.uniform(-0.5, 0.5, (n, 3))
     points[np.arange(n), face // 2] = np.where(face % 2, 0.5, -0.5)
     return points * size + center
+
+
+def grid(low, high, step=0.1):
+    """Points every ``step`` in the box ``[low, high]`` (a plane where one side is 0)."""
+    axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(low, high, strict=True)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)

@@ -10,6 +10,7 @@ whenever the ego motion moved by a few millimetres.
 
 import numpy as np
 import pytest
+from _surfaces import grid
 from scipy.spatial import cKDTree
 
 from mmreg.sweeps._icp import SurfaceNormals
@@ -18,18 +19,11 @@ from mmreg.tracking._evidence import track_claim
 _SHIFT, _PERIOD = 1.5, 2.0  # m, along x
 
 
-def _grid(low, high, step=0.1):
-    axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(low, high, strict=True)]
-    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-
-
 def _ribbed_side(length):
     """A 10 m side with a rib every period and its front end, upright."""
-    side = _grid([0.0, 1.0, 0.3], [length, 1.0, 2.0])
-    ribs = [
-        _grid([x, 0.9, 0.3], [x + 0.3, 0.9, 2.0]) for x in np.arange(0.0, length - 0.2, _PERIOD)
-    ]
-    front = _grid([length, 0.9, 0.3], [length, 2.0, 2.0])
+    side = grid([0.0, 1.0, 0.3], [length, 1.0, 2.0])
+    ribs = [grid([x, 0.9, 0.3], [x + 0.3, 0.9, 2.0]) for x in np.arange(0.0, length - 0.2, _PERIOD)]
+    front = grid([length, 0.9, 0.3], [length, 2.0, 2.0])
     return np.vstack([side, *ribs, front])
 
 
@@ -37,7 +31,7 @@ def _ribbed_side(length):
 @pytest.mark.parametrize("true_first", [True, False])
 def test_the_shift_that_explains_the_whole_body_wins(periods, true_first):
     rng = np.random.default_rng(0)
-    floor = _grid([-3.0, -3.0, 0.0], [20.0, 3.0, 0.0])
+    floor = grid([-3.0, -3.0, 0.0], [20.0, 3.0, 0.0])
     floor[:, 2] += rng.normal(0.0, 0.002, len(floor))
     body = _ribbed_side(10.0)
     first = np.vstack([floor, body])

@@ -10,6 +10,7 @@ its 50-60), until the track was mostly ground.
 
 import numpy as np
 import pytest
+from _surfaces import grid
 from scipy.spatial import cKDTree
 
 from mmreg.sweeps._icp import SurfaceNormals
@@ -20,23 +21,18 @@ _UP = np.array([0.0, 0.0, 1.0])
 _SHIFT = 1.5  # along x, m
 
 
-def _grid(low, high, step):
-    axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(low, high, strict=True)]
-    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-
-
 def _upright_faces(low, high, step):
     """The four upright faces of a box, sampled every ``step``."""
     (x0, y0, z0), (x1, y1, z1) = low, high
-    faces = [_grid([x, y0, z0], [x, y1, z1], step) for x in (x0, x1)]
-    faces += [_grid([x0 + step, y, z0], [x1 - step, y, z1], step) for y in (y0, y1)]
+    faces = [grid([x, y0, z0], [x, y1, z1], step) for x in (x0, x1)]
+    faces += [grid([x0 + step, y, z0], [x1 - step, y, z1], step) for y in (y0, y1)]
     return np.vstack(faces)
 
 
 def _claim(thing, rng, surface):
     """The claim of a shift by ``_SHIFT`` along x of ``thing`` above a floor, with or
     without the first sweep's normals."""
-    floor = _grid([-3.0, -3.0, 0.0], [6.0, 3.0, 0.0], 0.1)
+    floor = grid([-3.0, -3.0, 0.0], [6.0, 3.0, 0.0], 0.1)
     floor[:, 2] += rng.normal(0.0, 0.002, len(floor))
     first = np.vstack([floor, thing])
     second = np.vstack([floor, thing + [_SHIFT, 0.0, 0.0]])
@@ -64,7 +60,7 @@ def _claim(thing, rng, surface):
 def test_a_level_plate_sliding_along_itself_is_no_evidence(seed):
     # A plate 0.4 m above the floor moves 1.5 m along itself: only its level points
     # say so, 0.4 m (four spacings) above the floor where it was.
-    plate = _grid([0.0, 0.0, 0.4], [1.0, 1.0, 0.4], 0.1)
+    plate = grid([0.0, 0.0, 0.4], [1.0, 1.0, 0.4], 0.1)
     _, claim = _claim(plate, np.random.default_rng(seed), surface=False)
     assert claim is not None and len(claim.shown) == len(plate)  # without the normals
     _, claim = _claim(plate, np.random.default_rng(seed), surface=True)
@@ -88,10 +84,10 @@ def _frame(points):
 
 
 def test_the_ground_beneath_a_walker_is_left_out():
-    ground = _grid([-1.0, -1.0, 0.0], [1.4, 1.4, 0.0], 0.1)
+    ground = grid([-1.0, -1.0, 0.0], [1.4, 1.4, 0.0], 0.1)
     walker = _upright_faces([0.0, 0.0, 0.1], [0.4, 0.4, 1.7], 0.1)
     # A bonnet: a level part of the body 0.6 m above its lowest evidence.
-    bonnet = _grid([-1.0, 0.0, 0.7], [-0.5, 0.4, 0.7], 0.1)
+    bonnet = grid([-1.0, 0.0, 0.7], [-0.5, 0.4, 0.7], 0.1)
     points = np.vstack([ground, walker, bonnet])
     rows = np.arange(len(points))
     is_walker = (rows >= len(ground)) & (rows < len(ground) + len(walker))
@@ -102,7 +98,7 @@ def test_the_ground_beneath_a_walker_is_left_out():
 
 
 def test_nothing_is_left_out_without_the_vertical_or_upright_evidence():
-    ground = _grid([-1.0, -1.0, 0.0], [1.0, 1.0, 0.0], 0.1)
+    ground = grid([-1.0, -1.0, 0.0], [1.0, 1.0, 0.0], 0.1)
     rows = np.arange(len(ground))
     frame = _frame(ground)
     # Only level evidence: nothing says where the body stands.
