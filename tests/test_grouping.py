@@ -1,11 +1,18 @@
-"""Values sorted within groups, the per-group medians built on that order, and each
-group's bounding box and centroid."""
+"""Values sorted within groups, each group's middle values and the medians built on them,
+and each group's bounding box and centroid."""
 
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mmreg._array.grouping import group_bounds, group_centroids, sorted_within_groups, unique_sorted
+from mmreg._array.grouping import (
+    group_bounds,
+    group_centroids,
+    middle_values,
+    sorted_within_groups,
+    unique_sorted,
+)
+from mmreg._array.motion import _group_median
 from mmreg.em._steps import group_median
 
 
@@ -33,6 +40,35 @@ def test_the_order_of_a_lexsort_and_lower_medians(seed, n, n_groups, ties):
         for g in range(min(n_groups, 50))
     ]
     np.testing.assert_array_equal(group_median(values, labels, n_groups)[:50], expected)
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.sampled_from([1, 8, 129, 3000]),
+    n_groups=st.sampled_from([1, 2, 5, 300]),
+    kind=st.sampled_from(["normal", "ties", "special"]),
+)
+def test_middle_values_are_those_of_a_sort_within_each_group(seed, n, n_groups, kind):
+    # Large groups take a partition each, many small ones one sort: both give the floats
+    # a full sort puts in the middle, NaN and infinities included (sorted last and at
+    # the ends).
+    rng = np.random.default_rng(seed)
+    values = rng.normal(size=n)
+    if kind == "ties":
+        values = np.round(values)
+    elif kind == "special":
+        values[rng.random(n) < 0.2] = rng.choice([np.nan, np.inf, -np.inf])
+    groups = rng.integers(n_groups, size=n)
+    low, high = middle_values(values, groups, n_groups)
+    for g in range(n_groups):
+        own = np.sort(values[groups == g])
+        if len(own):
+            np.testing.assert_array_equal(low[g], own[(len(own) - 1) // 2])
+            np.testing.assert_array_equal(high[g], own[len(own) // 2])
+        else:
+            assert np.isnan(low[g]) and np.isnan(high[g])
+    with np.errstate(invalid="ignore"):  # inf - inf in a group's middle
+        np.testing.assert_array_equal(_group_median(values, groups, n_groups), 0.5 * (low + high))
 
 
 @given(

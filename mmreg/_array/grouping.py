@@ -3,7 +3,18 @@ the distinct values of integer keys."""
 
 import numpy as np
 
-__all__ = ["group_bounds", "group_centroids", "sorted_within_groups", "unique_sorted"]
+__all__ = [
+    "group_bounds",
+    "group_centroids",
+    "middle_values",
+    "sorted_within_groups",
+    "unique_sorted",
+]
+
+# Groups this large on average find their middle values by a partition each (linear)
+# rather than by one sort of all the values: a loop of a few microseconds a group
+# against a sort of some tens of nanoseconds a value.
+_PARTITION_SIZE = 64
 
 
 def _stable_group_order(groups, n_groups):
@@ -45,6 +56,57 @@ def sorted_within_groups(values, groups, n_groups):
     counts = np.bincount(groups, minlength=n_groups)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     return values[order], starts, counts
+
+
+def middle_values(values, groups, n_groups):
+    """The two middle values of every group, as a sort within each group puts them.
+
+    ``low`` is the value at position ``(c - 1) // 2`` of a group of ``c`` values sorted
+    ascending, ``high`` the one at ``c // 2`` (equal for odd ``c``; NaN for an empty
+    group): the same floats as :func:`sorted_within_groups` gives there, found by a
+    partition of each group where the groups are large.
+
+    Parameters
+    ----------
+    values : ndarray of shape (n,)
+    groups : ndarray of int of shape (n,)
+        Group of each value in ``0..n_groups-1``.
+    n_groups : int
+
+    Returns
+    -------
+    low, high : ndarray of shape (n_groups,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._array.grouping import middle_values
+    >>> low, high = middle_values(np.array([4.0, 1.0, 3.0, 2.0, 5.0]), np.array([0, 0, 0, 0, 1]), 3)
+    >>> low.tolist(), high.tolist()
+    ([2.0, 5.0, nan], [3.0, 5.0, nan])
+    """
+    values = np.asarray(values)
+    groups = np.asarray(groups)
+    low = np.full(n_groups, np.nan)
+    high = np.full(n_groups, np.nan)
+    counts = np.bincount(groups, minlength=n_groups)
+    full = np.flatnonzero(counts)
+    if not len(full):
+        return low, high
+    starts = np.cumsum(counts) - counts
+    if len(values) < _PARTITION_SIZE * len(full):
+        sorted_values, starts, counts = sorted_within_groups(values, groups, n_groups)
+        low[full] = sorted_values[starts[full] + (counts[full] - 1) // 2]
+        high[full] = sorted_values[starts[full] + counts[full] // 2]
+        return low, high
+    ordered = values if len(full) == 1 else values[_stable_group_order(groups, n_groups)]
+    for group, start, count in zip(
+        full.tolist(), starts[full].tolist(), counts[full].tolist(), strict=True
+    ):
+        middle = ((count - 1) // 2, count // 2)
+        part = np.partition(ordered[start : start + count], middle)
+        low[group], high[group] = part[middle[0]], part[middle[1]]
+    return low, high
 
 
 def group_bounds(points, groups, n_groups):

@@ -25,7 +25,7 @@ residual scale.
 import numpy as np
 
 from mmreg._array.geometry import moved_rows
-from mmreg._array.grouping import sorted_within_groups
+from mmreg._array.grouping import middle_values
 
 __all__ = [
     "MOVING_FACTOR",
@@ -74,13 +74,8 @@ def static_cluster(labels):
 
 def _group_median(values, groups, n_groups):
     """Median of ``values`` within each group ``0..n_groups-1`` (NaN for an empty group)."""
-    sorted_values, starts, counts = sorted_within_groups(values, groups, n_groups)
-    median = np.full(n_groups, np.nan)
-    has = counts > 0
-    low = starts[has] + (counts[has] - 1) // 2
-    high = starts[has] + counts[has] // 2
-    median[has] = 0.5 * (sorted_values[low] + sorted_values[high])
-    return median
+    low, high = middle_values(values, groups, n_groups)
+    return 0.5 * (low + high)
 
 
 def _row_norms(rows):

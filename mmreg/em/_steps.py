@@ -25,7 +25,7 @@ from scipy.stats import binom, chi2
 
 from mmreg._array.connectivity import tau_components
 from mmreg._array.geometry import column_bounds, own_residuals, residual_table
-from mmreg._array.grouping import sorted_within_groups, unique_sorted
+from mmreg._array.grouping import middle_values, unique_sorted
 from mmreg._array.moments import Moments, group_moments
 from mmreg._array.neighbors import NeighbourTable, touching_groups
 from mmreg.em._hypotheses import fit_minimal_samples, minimal_sample_size
@@ -267,13 +267,8 @@ def group_median(values, labels, n_groups):
     The lower median for an even count; rows with a negative label are ignored.
     """
     rows = np.flatnonzero(labels >= 0)
-    out = np.full(n_groups, np.nan)
-    if not len(rows):
-        return out
-    sorted_values, starts, counts = sorted_within_groups(values[rows], labels[rows], n_groups)
-    full = np.flatnonzero(counts > 0)
-    out[full] = sorted_values[starts[full] + (counts[full] - 1) // 2]
-    return out
+    low, _ = middle_values(values[rows], labels[rows], n_groups)
+    return low
 
 
 def robust_scales(squared, labels, n_clusters, d):
