@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 from mmreg.sweeps._ego_motion import _FINE_REACH, ego_motion
 from mmreg.sweeps._islands import voxel_islands
 
-__all__ = ["confirm_body", "find_ego_body", "fixed_candidates"]
+__all__ = ["confirm_body", "find_ego_body", "fixed_candidates", "would_show_body"]
 
 # An island of candidates is the body when this share of its points is carried off by
 # the ego motion (a third of a car's returns face along the motion: its ends and edges).
@@ -153,6 +153,29 @@ def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match, cel
         distance, _ = cKDTree(points[body]).query(sweep[second], distance_upper_bound=match)
         sweep_body[second[distance <= match]] = True
     return body, sweep_body
+
+
+def would_show_body(ego, tau):
+    """Whether a pair with ego motion ``ego`` would confirm the body, were there one.
+
+    It would where the motion carries every place within the candidates' reach of the
+    sensor (``0.6 tau``) farther than :func:`confirm_body` asks of a body's point (three
+    matching distances): at least ``|t| - 2 sin(angle / 2) reach``. A pair that stands
+    still, or barely moves, cannot tell a body from the static world.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.sweeps._ego_body import would_show_body
+    >>> would_show_body((np.eye(3), np.array([1.0, 0.0, 0.0])), tau=5.0)
+    True
+    >>> would_show_body((np.eye(3), np.array([0.05, 0.0, 0.0])), tau=5.0)
+    False
+    """
+    rotation, translation = ego
+    cosine = np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)
+    swing = 2.0 * np.sin(np.arccos(cosine) / 2.0) * _REACH * tau
+    return bool(np.linalg.norm(translation) - swing > 3 * _MATCH * tau)
 
 
 def find_ego_body(first, second, settings, ground=None, *, known=None):

@@ -34,6 +34,7 @@ from mmreg._array.geometry import rows_in_box
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_rows
 from mmreg._warnings import warn
+from mmreg.sweeps._ego_body import would_show_body
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -77,6 +78,9 @@ _SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
 # sensor, and where the last sweep's body was within this share.
 _BODY_REACH = 0.6
 _BODY_MATCH = 0.01
+# A log whose sensor sees no body of its own: this many pairs in a row that would have
+# shown one (they moved enough, would_show_body) showed none; later pairs look no more.
+_BODILESS_PAIRS = 2
 # Two tracks' pieces this close (share of tau) that move this alike (share of their
 # displacement, and of tau) are one object.
 _PIECES = 0.2
@@ -607,6 +611,9 @@ class LogTracker:
             # The ego vehicle's body is fixed in the sensor's frame: found once, it is
             # the next sweep's points where the last sweep's body points were.
             kwargs["ego_body"] = (previous.body, self._carried_body(previous, second))
+        elif "ego_body" in parameters and state.bodiless >= _BODILESS_PAIRS:
+            # ... and where pairs that would have shown it showed none, there is none.
+            kwargs["ego_body"] = (np.zeros(len(first), bool), np.zeros(len(second), bool))
         pair = estimator.fit(first, sweep=second, **kwargs)
         ego = to_matrix(*pair.ego_motion_)
         state.last_ego = (ego, dt)
@@ -617,6 +624,10 @@ class LogTracker:
         previous.pair_flow = np.asarray(pair.flow_)
         previous.body = _mask(getattr(pair, "ego_body_mask_", None), len(first))
         frame.body = _mask(getattr(pair, "sweep_ego_body_mask_", None), len(second))
+        if previous.body.any():
+            state.bodiless = 0
+        elif would_show_body(pair.ego_motion_, self.tau):
+            state.bodiless += 1
         static = int(pair.static_cluster_)
         detections = {
             j: (
@@ -1059,6 +1070,7 @@ class _LogState:
     n_frames: int = 0
     next_key: int = 0
     n_confirmed: int = 0
+    bodiless: int = 0  # pairs in a row that would have shown the ego body and showed none
 
     last_first: LogFrame | None = None  # the last frame that was a pair's first sweep
 
