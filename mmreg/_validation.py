@@ -173,6 +173,25 @@ def invalid_rows(X):
     return invalid
 
 
+def invalid_points(points):
+    """Rows of a point set ``(n, d)`` that hold no return: :func:`invalid_rows` of the
+    rows stacked with themselves, ``[points | points]``, without the copy.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._validation import invalid_points
+    >>> invalid_points(np.array([[0.0, 0, 0], [1, 2, 3], [np.nan, 0, 0], [0, 0, 0]])).tolist()
+    [True, False, True, True]
+    """
+    points = np.asarray(points, dtype=float)
+    invalid = np.isnan(points).any(axis=1)
+    at_origin = ~np.any(points != 0, axis=1) & ~invalid
+    if np.count_nonzero(at_origin) > 1:
+        invalid |= at_origin
+    return invalid
+
+
 class NotCorrespondencesError(ValueError):
     """Stacked rows ``[a | b]`` that pair points across the scene (see :func:`check_paired`)."""
 

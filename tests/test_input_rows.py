@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 from sklearn.metrics import adjusted_rand_score
 
 from mmreg import MultiModelRegistration
+from mmreg._validation import invalid_points, invalid_rows
 from mmreg.cli import main
 from mmreg.datasets import make_scene
 from mmreg.estimators._multi_model_registration import ScaleWarning, _first_copies
@@ -113,3 +114,18 @@ def test_first_copies_are_those_of_an_exact_row_comparison(seed, values):
     X = np.random.default_rng(seed).integers(0, values, (300, 6)).astype(float)
     _, first, inverse = np.unique(X, axis=0, return_index=True, return_inverse=True)
     assert_array_equal(_first_copies(X), first[inverse.ravel()])
+
+
+@given(
+    kinds=st.lists(st.sampled_from(["point", "origin", "nan"]), min_size=0, max_size=30),
+    d=st.sampled_from([2, 3]),
+)
+def test_invalid_points_are_the_invalid_rows_of_the_points_stacked_twice(kinds, d):
+    rng = np.random.default_rng(len(kinds))
+    points = rng.normal(size=(len(kinds), d))
+    for row, kind in enumerate(kinds):
+        if kind == "origin":
+            points[row] = 0.0
+        elif kind == "nan":
+            points[row, rng.integers(d)] = np.nan
+    assert_array_equal(invalid_points(points), invalid_rows(np.hstack([points, points])))

@@ -29,7 +29,12 @@ from mmreg._array.flow import rigid_flow
 from mmreg._array.motion import moving_clusters
 from mmreg._array.neighbors import query_workers
 from mmreg._array.point_memo import PointMemo
-from mmreg._validation import check_coordinate_range, check_ego_motion, invalid_rows
+from mmreg._validation import (
+    check_coordinate_range,
+    check_ego_motion,
+    invalid_points,
+    invalid_rows,
+)
 from mmreg.sweeps._cluster_icp import refine_clusters
 from mmreg.sweeps._ground import METRE_TAU
 from mmreg.sweeps._pair import DESKEW_ROUNDS, MIN_SWEEP_POINTS, clusters_of, register_pair
@@ -518,7 +523,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         if sweep is not None:
             _check_features(X)
         if X.shape[1] == 3:
-            invalid = invalid_rows(np.hstack([X, X]))
+            invalid = invalid_points(X)
         elif X.shape[1] % 2 == 0:
             invalid = invalid_rows(X)
         else:  # refused with its shape below
@@ -532,7 +537,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
                 sweep = sweep.astype(np.float64)
                 if np.isinf(sweep).any():
                     raise ValueError("sweep contains infinity.")
-                sweep_invalid = invalid_rows(np.hstack([sweep, sweep]))
+                sweep_invalid = invalid_points(sweep)
                 self.n_sweep_invalid_ = int(np.count_nonzero(sweep_invalid))
                 if len(sweep) - self.n_sweep_invalid_ < _MIN_SWEEP_POINTS <= len(sweep):
                     raise ValueError(
@@ -842,7 +847,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         points = points.astype(np.float64)
         if np.isinf(points).any():
             raise ValueError("points contain infinity.")
-        valid = ~invalid_rows(np.hstack([points, points]))
+        valid = ~invalid_points(points)
         return SweepState(points[valid], workers=self._workers())
 
     def _settings(self):

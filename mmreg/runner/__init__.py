@@ -364,10 +364,10 @@ def sweep_valid(points, indices, ego_body=None):
     >>> sweep_valid(points, [0, 1, 3], ego_body=[False, True, False]).tolist()
     [True, False, False, True]
     """
-    from mmreg._validation import invalid_rows
+    from mmreg._validation import invalid_points
 
     points = np.asarray(points, dtype=float)
-    valid = ~invalid_rows(np.hstack([points, points]))
+    valid = ~invalid_points(points)
     if ego_body is not None:
         valid[np.asarray(indices, dtype=np.intp)[np.asarray(ego_body, dtype=bool)]] = False
     return valid

@@ -32,7 +32,7 @@ from sklearn.utils import Bunch
 
 from mmreg._array.geometry import rows_in_box
 from mmreg._array.unique_rows import unique_rows
-from mmreg._validation import invalid_rows
+from mmreg._validation import invalid_points
 from mmreg._warnings import warn
 from mmreg.sweeps._ego_body import would_show_body
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
@@ -241,7 +241,7 @@ class LogTracker:
         if points.ndim != 2 or points.shape[1] < 3:
             raise ValueError(f"a frame must have shape (n, 3); got {points.shape}.")
         points = points[:, :3]
-        valid = ~invalid_rows(np.hstack([points, points]))
+        valid = ~invalid_points(points)
         index = state.n_frames
         used, covered = self._voxels(points, valid)
         frame = LogFrame(index, points, used, self._time(index, time), given_pose=pose)
