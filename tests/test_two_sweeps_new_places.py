@@ -73,3 +73,32 @@ def test_generated_streets_call_no_static_piece_moving(interval, seed, beams):
         assert static[est.labels_ == cluster].mean() < 0.5
     cars = [k for k in range(1, scene.labels.max() + 1) if (scene.labels == k).sum() >= 50]
     assert objects_found(scene.labels, est.labels_, objects=cars, min_iou=0.5) == 1.0
+
+
+def test_shares_do_not_depend_on_the_frame_of_the_sensor():
+    # The sensor turned by 20 degrees and drove 3 m on between the sweeps (the static
+    # world's motion): the box still shows new places, the strip slid down the wall
+    # none, whichever frame each sweep is written in. (Each sweep jittered by a
+    # millimetre: a grid's equidistant neighbours would leave the nearest to rounding.)
+    rng = np.random.default_rng(0)
+    wall = _grid((0.0, 6.0), (0.0, 2.5))
+    strip = _grid((0.0, 6.0), (2.5, 3.0))
+    box = _grid((2.0, 3.0), (0.0, 1.0), y=-2.0)
+    face = _grid((0.0, 1.0), (0.0, 1.0))[:, [1, 0, 2]] + [3.0, -3.0, 0.0]  # across x
+    a = np.vstack([wall, strip, box, face])
+    a += rng.normal(0.0, 1e-3, a.shape)
+    c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
+    ego = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([3.0, -1.0, 0.2])
+    second = np.vstack([wall, box + [0.5, 0.0, 0.0], face + [0.5, 0.0, 0.0]])
+    second += rng.normal(0.0, 1e-3, second.shape)
+    sweep = second @ ego[0].T + ego[1]
+    labels = np.repeat([0, 1, 2, 2], [len(wall), len(strip), len(box), len(face)])
+    rotations = np.stack([ego[0]] * 3)
+    moves = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -0.5], [0.5, 0.0, 0.0]])
+    motions = (rotations, moves @ ego[0].T + ego[1])
+    shares = new_place_shares(a, labels, motions, 0, 0.005, _target(sweep))
+    still = new_place_shares(
+        a, labels, (np.stack([np.eye(3)] * 3), moves), 0, 0.005, _target(second)
+    )
+    assert shares[1] == still[1] == 0.0
+    assert shares[2] == still[2] > 2 * MIN_NEW_PLACE

@@ -66,7 +66,7 @@ def join_slides(a, labels, motions, static, sigma, target, reach, whole=None, ow
     unseen = departure < 0.5 * _group_median(spacing, group, n_clusters)
     # A cluster whose motion shows none of it at a new place slid onto static surfaces.
     shares = new_place_shares(
-        a, labels, motions[:2], static, sigma, target, reach=reach, whole=whole
+        a, labels, motions[:2], static, sigma, target, reach=reach, whole=whole, own=own_normals
     )
     # Only where its surfaces' normals lie across the motion (a wall, a building's
     # corner slid along itself): a car seen from behind that drives on by less than its

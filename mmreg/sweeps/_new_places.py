@@ -30,7 +30,9 @@ MIN_NEW_PLACE = _MIN_EXPLAINED
 _NORMAL_POINTS = 10
 
 
-def new_place_shares(a, labels, motions, static, scale, target, *, reach=None, whole=None):
+def new_place_shares(
+    a, labels, motions, static, scale, target, *, reach=None, whole=None, own=None
+):
     """Share of each cluster's points that its motion shows at a new place.
 
     A point counts when the static world's motion leaves it unexplained by the second
@@ -61,12 +63,15 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach=None, w
         and its motion between the sweeps' reference times puts its raw points near,
         not on, its second view.
     whole : tuple or None
-        ``(points, target)``: the first sweep and the second (as ``target``) with the
-        ground that ``a`` and ``target`` leave out. Whether the static world's motion
-        explains a point, and whether the first sweep explains a landing place, is then
-        asked of the whole sweeps: the two masks of the ground differ at objects' feet,
-        and a surface left in one sweep only would read as new. None: ``a`` and
-        ``target`` are whole.
+        ``(first, second)``: the first sweep and the second, each as ``target`` is
+        (points, tree, normals), with the ground that ``a`` and ``target`` leave out.
+        Whether the static world's motion explains a point, and whether the first sweep
+        explains a landing place, is then asked of the whole sweeps: the two masks of
+        the ground differ at objects' feet, and a surface left in one sweep only would
+        read as new. None: ``a`` and ``target`` are whole.
+    own : SurfaceNormals or None, default=None
+        Where ``whole`` is None, the normals of ``a`` (10 neighbours, with its tree)
+        where the caller keeps them; None: built here.
 
     Returns
     -------
@@ -110,10 +115,13 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach=None, w
     if not len(members):
         return shares
     sweep, tree, normals = target
-    first, (whole_sweep, whole_tree, whole_normals) = (a, target) if whole is None else whole
+    if whole is None:
+        if own is None:
+            own = SurfaceNormals(a, cKDTree(a), _NORMAL_POINTS)
+        whole = ((a, own.tree, own), target)
+    (first, first_tree, first_normals), (whole_sweep, whole_tree, whole_normals) = whole
     counts = np.bincount(labels[members], minlength=n_clusters)
     rest = rotations[static], translations[static]
-    at_rest = first @ rest[0].T + rest[1]
     unexplained, _ = unexplained_mask(
         a[members] @ rest[0].T + rest[1], whole_tree, whole_sweep, whole_normals, scale
     )
@@ -130,9 +138,11 @@ def new_place_shares(a, labels, motions, static, scale, target, *, reach=None, w
     new = np.zeros(len(rows), dtype=bool)
     if len(rows):
         places, inverse = np.unique(landing, return_inverse=True)
-        rest_tree = cKDTree(at_rest)
-        rest_normals = SurfaceNormals(at_rest, rest_tree, _NORMAL_POINTS)
-        new_place, _ = unexplained_mask(sweep[places], rest_tree, at_rest, rest_normals, scale)
+        # Whether the first sweep, moved by the static world's motion, explains a place:
+        # asked in the first sweep's own frame (distances and the normals' planes do not
+        # change under a rigid motion), of its tree and normals, which its state keeps.
+        back = (sweep[places] - rest[1]) @ rest[0]
+        new_place, _ = unexplained_mask(back, first_tree, first, first_normals, scale)
         new = new_place[inverse.ravel()]
     shown = np.bincount(group, weights=new, minlength=n_clusters)
     present = counts > 0

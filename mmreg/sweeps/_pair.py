@@ -290,7 +290,7 @@ def _clusters(first, second, egos, sigma, settings, cluster, rng, timing, whole=
             target,
             # Motions fitted to deskewed points put the raw ones near their view.
             None if timing is None else settings.max_distance,
-            None if whole is None else (whole[0].points, whole[1].target()),
+            None if whole is None else (whole[0].target(), whole[1].target()),
             own_normals=first.normals,
         )
         # Motions no vehicle or person can make: taken apart (the static world where
