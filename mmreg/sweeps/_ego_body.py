@@ -19,8 +19,8 @@ units of its ``tau``).
 """
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from mmreg._array.neighbors import lookup_tree
 from mmreg.sweeps._ego_motion import _FINE_REACH, ego_motion
 from mmreg.sweeps._islands import voxel_islands
 
@@ -85,9 +85,9 @@ def fixed_candidates(points, sweep, *, reach, match, exclude=None, sweep_exclude
     if not near.any() or not sweep_near.any():
         return candidates, sweep_candidates
     first, second = np.flatnonzero(near), np.flatnonzero(sweep_near)
-    distance, _ = cKDTree(sweep[second]).query(points[first], distance_upper_bound=match)
+    distance, _ = lookup_tree(sweep[second]).query(points[first], distance_upper_bound=match)
     candidates[first[distance <= match]] = True
-    distance, _ = cKDTree(points[first]).query(sweep[second], distance_upper_bound=match)
+    distance, _ = lookup_tree(points[first]).query(sweep[second], distance_upper_bound=match)
     sweep_candidates[second[distance <= match]] = True
     return candidates, sweep_candidates
 
@@ -136,7 +136,7 @@ def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match, cel
     rotation, translation = ego
     moved = points[first] @ rotation.T + translation
     carried = np.linalg.norm(moved - points[first], axis=1) > 3 * match
-    distance, _ = cKDTree(sweep).query(moved, distance_upper_bound=match)
+    distance, _ = lookup_tree(sweep).query(moved, distance_upper_bound=match)
     carried &= distance > match
     around = np.flatnonzero(near | candidates)
     islands, n_islands = voxel_islands(points[around], cell, 1)
@@ -150,7 +150,7 @@ def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match, cel
     body[around] = chosen[islands] & fixed
     if body.any():
         second = np.flatnonzero(sweep_candidates)
-        distance, _ = cKDTree(points[body]).query(sweep[second], distance_upper_bound=match)
+        distance, _ = lookup_tree(points[body]).query(sweep[second], distance_upper_bound=match)
         sweep_body[second[distance <= match]] = True
     return body, sweep_body
 

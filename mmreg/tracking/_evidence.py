@@ -12,9 +12,9 @@ explains it.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from mmreg._array.geometry import rows_in_box
+from mmreg._array.neighbors import lookup_tree
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_at
 from mmreg.sweeps._icp import multi_body_icp
 from mmreg.sweeps._level_icp import level_icp, level_part
@@ -52,7 +52,7 @@ def near_points(points, where, radius, candidates=None):
     box = rows_in_box(points, low, high, candidates)
     if not len(box):
         return box
-    distance, _ = cKDTree(where).query(points[box], distance_upper_bound=radius)
+    distance, _ = lookup_tree(where).query(points[box], distance_upper_bound=radius)
     return box[np.isfinite(distance)]
 
 

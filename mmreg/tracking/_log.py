@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 from sklearn.utils import Bunch
 
 from mmreg._array.geometry import rows_in_box
+from mmreg._array.neighbors import lookup_tree
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
@@ -521,15 +522,17 @@ class LogTracker:
             for other in tracks[i + 1 :]:
                 if other.key in joined:
                     continue
-                mine = first[previous.track_of == keep.key]
-                theirs = first[previous.track_of == other.key]
-                distance, _ = cKDTree(mine).query(theirs, distance_upper_bound=_PIECES * self.tau)
-                if not np.isfinite(distance).any():
-                    continue
                 # Pieces of one body move as one: far more alike than two tracks' motions
-                # that merely follow each other.
+                # that merely follow each other (asked first: it costs no tree).
                 apart = np.linalg.norm((keep.velocity - other.velocity) * dt)
                 if apart > _ALIKE * np.linalg.norm(keep.velocity * dt) + _ALIKE_NOISE * self.tau:
+                    continue
+                mine = first[previous.track_of == keep.key]
+                theirs = first[previous.track_of == other.key]
+                distance, _ = lookup_tree(mine).query(
+                    theirs, distance_upper_bound=_PIECES * self.tau
+                )
+                if not np.isfinite(distance).any():
                     continue
                 previous.track_of[previous.track_of == other.key] = keep.key
                 previous.motions.pop(other.key, None)
@@ -569,7 +572,7 @@ class LogTracker:
             near = near_points(points, moved, _TIGHT * self.tau, np.flatnonzero(free))
             if not len(near):
                 continue
-            distance, _ = cKDTree(moved).query(points[near])
+            distance, _ = lookup_tree(moved).query(points[near])
             near = near[distance <= EXPLAINED_SPACINGS * normals.spacing(near)]
             if len(near) < _MIN_EVIDENCE:  # a few points are no object's
                 continue
@@ -655,7 +658,7 @@ class LogTracker:
         near = np.linalg.norm(points, axis=1) <= _BODY_REACH * self.tau
         carried = np.zeros(len(points), dtype=bool)
         if near.any():
-            distance, _ = cKDTree(body).query(
+            distance, _ = lookup_tree(body).query(
                 points[near], distance_upper_bound=_BODY_MATCH * self.tau
             )
             carried[near] = np.isfinite(distance)

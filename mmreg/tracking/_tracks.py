@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mmreg._array.geometry import rows_in_box
+from mmreg._array.neighbors import lookup_tree
 from mmreg.tracking._motion import predicted_motion, transform, twist_of
 
 __all__ = ["Track", "consistent_motion", "overlap_matrix"]
@@ -87,13 +88,11 @@ def overlap_matrix(detections, predictions, radii):
     >>> overlap_matrix(d, p, [0.5]).tolist()
     [[1.0], [0.0]]
     """
-    from scipy.spatial import cKDTree
-
     table = np.zeros((len(detections), len(predictions)))
     for j, (where, radius) in enumerate(zip(predictions, radii, strict=True)):
         if not len(where):
             continue
-        tree = cKDTree(where)
+        tree = lookup_tree(where)  # distances alone are read
         low, high = where.min(axis=0) - radius, where.max(axis=0) + radius
         for i, points in enumerate(detections):
             inside = rows_in_box(points, low, high)

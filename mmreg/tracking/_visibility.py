@@ -8,7 +8,8 @@ hidden when a return in its direction is clearly nearer than it.
 """
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from mmreg._array.neighbors import lookup_tree
 
 __all__ = ["RangeView"]
 
@@ -53,7 +54,7 @@ class RangeView:
         rng = np.random.default_rng(0)
         sample = rng.choice(len(sweep), min(_SAMPLE, len(sweep)), replace=False)
         flat = np.column_stack([azimuth * np.cos(elevation), elevation])
-        gap, _ = cKDTree(flat).query(flat[sample], k=2)
+        gap, _ = lookup_tree(flat).query(flat[sample], k=2)  # distances alone are read
         spacing = float(np.median(gap[:, 1]))
         self.cell = max(_CELLS_PER_SPACING * spacing, 1e-6)
         self.n_azimuth = int(np.ceil(2 * np.pi / self.cell)) + 1
