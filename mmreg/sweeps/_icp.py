@@ -1,10 +1,8 @@
 """Multi-body ICP: every cluster's rigid motion refined on a second point set at once.
 
 Each cluster ``j`` carries a motion ``(R_j, t_j)``; its points ``a_i`` are moved by it,
-matched to their nearest neighbour ``q_i`` in the target (one KD-tree, built once; an
-iteration queries it again only for the points whose nearest neighbour may have changed,
-:mod:`mmreg._array.moving_nearest`), and the motions are updated by one Gauss-Newton step
-of the robust point-to-plane cost
+matched to their nearest neighbour ``q_i`` in the target (one KD-tree, built once), and
+the motions are updated by one Gauss-Newton step of the robust point-to-plane cost
 
     sum_i rho( n_i . (R_j a_i + t_j - q_i) / s_j ),
 
@@ -29,7 +27,6 @@ from sklearn.utils import check_random_state
 
 # The same median as the command line's motion statistics (the mean of the two middle values).
 from mmreg._array.motion import _group_median
-from mmreg._array.moving_nearest import MovingNearest
 
 __all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
 
@@ -356,21 +353,18 @@ def multi_body_icp(
     # A cluster whose step fell below ``tol`` is done: later iterations leave its points
     # out (hypothesis tests run hundreds of clusters, most of which settle early).
     alive = np.ones(n_clusters, dtype=bool)
-    # Most points move by far less than the gaps between target points after the first
-    # steps: their nearest target point is re-queried only where it may have changed.
-    nearest_of = MovingNearest(tree, len(every_point), float(gate.max()), workers)
-    every_row = np.arange(len(every_point))
+    bound = float(gate.max())
     for iteration in range(max_iter + 1):
         final = converged or iteration == max_iter
         if final and not measure and iteration:
             break
         if final or alive.all():
-            points, group, row = every_point, every_group, every_row
+            points, group = every_point, every_group
         else:
             keep = alive[every_group]
-            points, group, row = every_point[keep], every_group[keep], every_row[keep]
+            points, group = every_point[keep], every_group[keep]
         moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
-        distance, nearest = nearest_of(moved, row, gate[group])
+        distance, nearest = tree.query(moved, distance_upper_bound=bound, workers=workers)
         matched = distance <= gate[group]
         rows = np.flatnonzero(matched)
         g = group[rows]
