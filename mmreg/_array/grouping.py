@@ -93,12 +93,12 @@ def middle_values(values, groups, n_groups):
     full = np.flatnonzero(counts)
     if not len(full):
         return low, high
-    starts = np.cumsum(counts) - counts
     if len(values) < _PARTITION_SIZE * len(full):
         sorted_values, starts, counts = sorted_within_groups(values, groups, n_groups)
         low[full] = sorted_values[starts[full] + (counts[full] - 1) // 2]
         high[full] = sorted_values[starts[full] + counts[full] // 2]
         return low, high
+    starts = np.cumsum(counts) - counts
     ordered = values if len(full) == 1 else values[_stable_group_order(groups, n_groups)]
     for group, start, count in zip(
         full.tolist(), starts[full].tolist(), counts[full].tolist(), strict=True
