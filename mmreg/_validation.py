@@ -192,6 +192,21 @@ def invalid_points(points):
     return invalid
 
 
+def no_return(values):
+    """Rows that hold no measurement, of points (odd columns: :func:`invalid_points`) or
+    of correspondences ``[a | b]`` (even columns: :func:`invalid_rows`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._validation import no_return
+    >>> no_return(np.array([[0.0, 0, 0], [1, 2, 3], [0, 0, 0]])).tolist()
+    [True, False, True]
+    """
+    values = np.asarray(values, dtype=float)
+    return invalid_rows(values) if values.shape[1] % 2 == 0 else invalid_points(values)
+
+
 class NotCorrespondencesError(ValueError):
     """Stacked rows ``[a | b]`` that pair points across the scene (see :func:`check_paired`)."""
 

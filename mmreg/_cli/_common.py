@@ -267,11 +267,7 @@ class NoReturns:
     def __init__(self, X, sweep):
         import numpy as np
 
-        from mmreg._validation import invalid_rows
-
-        def no_return(values):
-            values = np.asarray(values, dtype=float)
-            return invalid_rows(values if values.shape[1] % 2 == 0 else np.hstack([values] * 2))
+        from mmreg._validation import no_return
 
         self.keep = ~no_return(X)
         self.keep_sweep = ~no_return(sweep)

@@ -430,11 +430,7 @@ def _drop_no_returns(data):
     ground flag and truth. The count is of the first sweep's file
     (``sweep_points``) when the job gives it: rows a sequence job dropped itself count too.
     """
-    from mmreg._validation import invalid_rows
-
-    def no_return(values):  # points (odd columns) or correspondences [a | b]
-        values = np.asarray(values, dtype=float)
-        return invalid_rows(values if values.shape[1] % 2 == 0 else np.hstack([values] * 2))
+    from mmreg._validation import no_return  # points (odd columns) or [a | b]
 
     X = np.asarray(data["X"], dtype=float)
     keep = ~no_return(X)
