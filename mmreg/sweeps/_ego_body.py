@@ -24,7 +24,7 @@ from mmreg._array.neighbors import lookup_tree
 from mmreg.sweeps._ego_motion import _FINE_REACH, ego_motion
 from mmreg.sweeps._islands import voxel_islands
 
-__all__ = ["confirm_body", "find_ego_body", "fixed_candidates", "would_show_body"]
+__all__ = ["carried_body", "confirm_body", "find_ego_body", "fixed_candidates", "would_show_body"]
 
 # An island of candidates is the body when this share of its points is carried off by
 # the ego motion (a third of a car's returns face along the motion: its ends and edges).
@@ -153,6 +153,29 @@ def confirm_body(points, sweep, candidates, sweep_candidates, ego, *, match, cel
         distance, _ = lookup_tree(points[body]).query(sweep[second], distance_upper_bound=match)
         sweep_body[second[distance <= match]] = True
     return body, sweep_body
+
+
+def carried_body(body, points, tau):
+    """The points of a sweep where the last sweep's ``body`` points were: the body is
+    fixed in the sensor's frame, so a log carries it from sweep to sweep without a search.
+
+    Points within the candidates' reach of the sensor (``0.6 tau``) and nearer than the
+    matching distance (``tau / 100``) to a body point, in the same sensor coordinates.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg.sweeps._ego_body import carried_body
+    >>> body = np.array([[1.0, 0.0, 0.0]])
+    >>> carried_body(body, np.array([[1.01, 0.0, 0.0], [1.2, 0.0, 0.0]]), tau=5.0).tolist()
+    [True, False]
+    """
+    near = np.linalg.norm(points, axis=1) <= _REACH * tau
+    carried = np.zeros(len(points), dtype=bool)
+    if near.any():
+        distance, _ = lookup_tree(body).query(points[near], distance_upper_bound=_MATCH * tau)
+        carried[near] = np.isfinite(distance)
+    return carried
 
 
 def would_show_body(ego, tau):

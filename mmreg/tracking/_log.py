@@ -35,7 +35,7 @@ from mmreg._array.neighbors import lookup_tree
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
-from mmreg.sweeps._ego_body import would_show_body
+from mmreg.sweeps._ego_body import carried_body, would_show_body
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -75,10 +75,6 @@ _MIN_OVERLAP = 0.3
 _MOTION_TOLERANCE = 0.04
 # The prediction's twist is tried at these shares of its speed.
 _SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
-# The ego vehicle's body (as SweepRegistration finds it): within this share of tau of the
-# sensor, and where the last sweep's body was within this share.
-_BODY_REACH = 0.6
-_BODY_MATCH = 0.01
 # A log whose sensor sees no body of its own: this many pairs in a row that would have
 # shown one (they moved enough, would_show_body) showed none; later pairs look no more.
 _BODILESS_PAIRS = 2
@@ -613,7 +609,8 @@ class LogTracker:
         if "ego_body" in parameters and previous.body is not None and previous.body.any():
             # The ego vehicle's body is fixed in the sensor's frame: found once, it is
             # the next sweep's points where the last sweep's body points were.
-            kwargs["ego_body"] = (previous.body, self._carried_body(previous, second))
+            body = previous.returns[previous.body]
+            kwargs["ego_body"] = (previous.body, carried_body(body, second, self.tau))
         elif "ego_body" in parameters and state.bodiless >= _BODILESS_PAIRS:
             # ... and where pairs that would have shown it showed none, there is none.
             kwargs["ego_body"] = (np.zeros(len(first), bool), np.zeros(len(second), bool))
@@ -650,19 +647,6 @@ class LogTracker:
             sweep_ground=_mask(getattr(pair, "sweep_ground_mask_", None), len(second)),
             detections=detections,
         )
-
-    def _carried_body(self, previous, points):
-        """The points of a sweep within the body's matching distance of where the last
-        sweep's body points were, in the same sensor coordinates."""
-        body = previous.returns[previous.body]
-        near = np.linalg.norm(points, axis=1) <= _BODY_REACH * self.tau
-        carried = np.zeros(len(points), dtype=bool)
-        if near.any():
-            distance, _ = lookup_tree(body).query(
-                points[near], distance_upper_bound=_BODY_MATCH * self.tau
-            )
-            carried[near] = np.isfinite(distance)
-        return carried
 
     def _predict(self, time, pose):
         """Every track's points predicted to ``time``, in the sensor frame at ``pose``,
