@@ -209,7 +209,7 @@ def run_sequence(log, repeats=3):
         start = time.perf_counter()
         est = SequenceRegistration(random_state=0).fit(log["frames"], times=log["times"])
         seconds.append((time.perf_counter() - start) / len(log["frames"]))
-        kiss.append(kiss_seconds(log, runs=1))
+        kiss.append(kiss_seconds(log))
     row = scores(log, est.labels_, est.moving_, float(np.median(seconds)))
     truth = log["poses"]
     errors = [
@@ -245,19 +245,16 @@ def run_pairs(log):
     return row
 
 
-def kiss_seconds(log, runs=1):
+def kiss_seconds(log):
+    """KISS-ICP's odometry's seconds a frame on the log's frames, one run (NaN without
+    kiss-icp)."""
     try:
         from kiss_odometry import kiss_icp_odometry
-    except ImportError:
+
+        result = kiss_icp_odometry(log["frames"], max_num_threads=1)
+    except ImportError:  # kiss-icp not installed
         return np.nan
-    seconds = []
-    for _ in range(runs):
-        try:
-            result = kiss_icp_odometry(log["frames"], max_num_threads=1)
-        except ImportError:  # kiss-icp not installed
-            return np.nan
-        seconds.append(np.mean(result.wall_s))
-    return float(np.median(seconds))
+    return float(np.mean(result.wall_s))
 
 
 def markdown(table):
