@@ -120,6 +120,41 @@ def test_two_raw_sweeps():
     assert est.moving_.sum() == 2
 
 
+def test_passthrough_keeps_the_moving_islands_and_refines_their_motions():
+    a, b, labels, rotations, translations, sweep = make_pair()
+    est = SweepRegistration(
+        "passthrough", tau=2.0, max_distance=1.5, island_radius=1.0, min_island_size=20,
+        random_state=0,
+    ).fit(a, sweep=sweep)  # fmt: skip
+    assert est.estimator_ is None and est.n_iter_ == 0
+    assert _motion_error(est, a, labels, rotations, translations) < EXACT
+    assert est.moving_.sum() == 2
+    for k in np.flatnonzero(est.moving_):  # each moving cluster is one car
+        assert len(np.unique(labels[est.labels_ == k])) == 1
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e3])
+def test_passthrough_in_any_units_given_tau(scale):
+    a, b, labels, rotations, translations, sweep = make_pair()
+    params = {"max_distance": 1.5, "island_radius": 1.0, "min_island_size": 20}
+    metres = SweepRegistration("passthrough", tau=2.0, random_state=0, **params)
+    metres = metres.fit(a, sweep=sweep)
+    scaled_params = {k: v * scale if isinstance(v, float) else v for k, v in params.items()}
+    scaled = SweepRegistration("passthrough", tau=2.0 * scale, random_state=0, **scaled_params)
+    scaled = scaled.fit(a * scale, sweep=sweep * scale)
+    assert scaled.max_displacement_ == pytest.approx(metres.max_displacement_ * scale)
+    assert np.mean(scaled.labels_ == metres.labels_) > 0.99
+    assert np.abs(scaled.flow_ / scale - metres.flow_).max() < EXACT
+
+
+def test_passthrough_needs_two_raw_sweeps():
+    a, b, *_, sweep = make_pair()
+    with pytest.raises(ValueError, match="passthrough"):
+        SweepRegistration("passthrough").fit(np.hstack([a, b]))
+    with pytest.raises(ValueError, match="passthrough"):
+        SweepRegistration("passthrough").fit(np.hstack([a, b]), sweep=sweep)
+
+
 def test_raw_sweeps_start_from_the_islands_unless_the_estimator_s_init_is_asked_for():
     a, b, labels, rotations, translations, sweep = make_pair()
     raw = SweepRegistration(max_distance=1.5, island_radius=1.0, min_island_size=20)

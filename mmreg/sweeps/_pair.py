@@ -77,6 +77,17 @@ def clusters_of(estimator, X):
     return labels, rotations, translations, int(static), np.asarray(moving, dtype=bool)
 
 
+def _island_clusters(labels, motions):
+    """The islands' clusters without an estimator: ``labels`` (0 the static world, ``k``
+    the ``k``-th of ``motions``) renumbered over the clusters that hold points, their
+    motions, and the static world's cluster (-1 where no point is static)."""
+    counts = np.bincount(labels, minlength=len(motions[0]))
+    used = np.flatnonzero(counts)
+    place = np.cumsum(counts > 0) - 1
+    static = 0 if counts[0] else -1
+    return place[labels], motions[0][used], motions[1][used], static
+
+
 def pair_ground(first, second, settings):
     """The ground of both sweeps, or None (kept): found when the first sweep is z-up and
     holds a ground (one removed before leaves remnants that are objects' bottoms)."""
@@ -106,7 +117,8 @@ def register_pair(
     settings : PairSettings
     cluster : callable
         ``cluster(X, init)``: the multi-model estimator fitted on correspondences ``X``
-        ``(n, 6)`` from initial clusters ``init`` (the islands, then the last round's).
+        ``(n, 6)`` from initial clusters ``init`` (the islands, then the last round's);
+        None: the islands' clusters as they are (``estimator="passthrough"``).
     rng : RandomState
     known : tuple (R, t) or None
         The ego motion's start (a previous pair's); None: from the identity.
@@ -248,10 +260,14 @@ def _clusters(first, second, egos, sigma, settings, cluster, rng, timing, whole=
     on_moving[islands >= 0] = moving[islands[islands >= 0]]
     labels = np.where(on_moving, islands + 1, 0)
     previous = None
+    estimator = None
     for round_ in range(1, settings.max_rounds + 1):
-        X = np.hstack([a, rigid_flow(a, labels, *motions) + a])
-        estimator = cluster(X, labels)
-        labels, rotations, translations, static, _ = clusters_of(estimator, X)
+        if cluster is None:  # the islands' clusters pass through, as they are
+            labels, rotations, translations, static = _island_clusters(labels, motions)
+        else:
+            X = np.hstack([a, rigid_flow(a, labels, *motions) + a])
+            estimator = cluster(X, labels)
+            labels, rotations, translations, static, _ = clusters_of(estimator, X)
         # The static world keeps the ego motion: its ICP used the whole sweep, and
         # on real sweeps one fitted to the static cluster alone was worse (static EPE
         # 0.031 m against 0.020 m on icpflow_av2_demo).
