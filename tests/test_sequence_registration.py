@@ -80,6 +80,21 @@ def street():
     return log, est
 
 
+def test_tau_sets_the_units_of_the_log_and_of_its_pairs(street):
+    # The same street in millimetres, told so by tau alone: the same tracks.
+    log, metres = street
+    scale = 1000.0
+    frames = [frame * scale for frame in log.frames]
+    est = SequenceRegistration(tau=5.0 * scale, random_state=0).fit(frames, times=log.times)
+    assert est._pair_estimator(0).get_params()["tau"] == 5.0 * scale
+    # (Pairs taken at tau 5 in any units found a tenth of the moving points here.)
+    for mm, m in zip(est.moving_, metres.moving_, strict=True):
+        assert np.mean(mm == m) > 0.95
+    found = sum(int(m.sum()) for m in est.moving_)
+    assert found > 0.85 * sum(int(m.sum()) for m in metres.moving_)
+    assert est.n_tracks_ == metres.n_tracks_
+
+
 def test_a_ghost_seen_in_one_pair_is_dropped(street):
     log, _ = street
     k = 2

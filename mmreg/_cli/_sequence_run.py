@@ -93,21 +93,21 @@ def remove_results(out):
 
 def _estimator(args):
     """The sequence estimator of the options; its own pair estimator unless they ask for
-    another (--method, --max-iter, --tau, --ground)."""
+    another (--method, --max-iter, --ground); --tau is the sequence's and its pairs'."""
     from mmreg import MultiModelRegistration, SequenceRegistration
     from mmreg.estimators._sequence import default_pair_estimator
 
     pair = None
-    inner = args.method != "sweep" or args.max_iter != 10 or args.tau != 5.0
+    tau = 5.0 if args.tau is None else args.tau
+    inner = args.method != "sweep" or args.max_iter != 10
     if inner or args.ground != "auto":
-        estimator = None
-        if inner:
-            estimator = MultiModelRegistration(
+        params = {"tau": tau, "ground": args.ground}
+        if inner:  # a multi-model estimator asked for by name
+            params["estimator"] = MultiModelRegistration(
                 variant=args.method, tau=args.tau, max_iter=args.max_iter, random_state=args.seed
             )
         # Seeded by the sequence, a new seed for every pair.
-        pair = default_pair_estimator(estimator=estimator, ground=args.ground)
-    tau = 5.0 if args.tau is None else args.tau
+        pair = default_pair_estimator(**params)
     return SequenceRegistration(
         pair,
         tau=tau,
