@@ -192,7 +192,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         ``"passthrough"`` (two raw sweeps only): no estimator; the clusters are the
         moving islands and their refined motions, the rest the static world. A log's
         tracks re-assign the points one by one, so ``SequenceRegistration`` pairs its
-        sweeps this way (the same labels on the shared logs, in 5-20 % less time).
+        sweeps this way (the same labels on the shared logs, in 11-14 % less time).
         Its ``n_jobs``, if it has one, also sets the threads of the ICPs' k-d tree
         queries (the same answers; None: one thread).
     tau : float or None, default=None
