@@ -87,11 +87,10 @@ def test_tau_sets_the_units_of_the_log_and_of_its_pairs(street):
     frames = [frame * scale for frame in log.frames]
     est = SequenceRegistration(tau=5.0 * scale, random_state=0).fit(frames, times=log.times)
     assert est._pair_estimator(0).get_params()["tau"] == 5.0 * scale
-    # (Pairs taken at tau 5 in any units found a tenth of the moving points here.)
-    for mm, m in zip(est.moving_, metres.moving_, strict=True):
-        assert np.mean(mm == m) > 0.95
-    found = sum(int(m.sum()) for m in est.moving_)
-    assert found > 0.85 * sum(int(m.sum()) for m in metres.moving_)
+    # (Pairs taken at tau 5 in any units found a tenth of the moving points here, and a
+    # level ICP whose turn was weighed in square units 98-99 % of the labels.)
+    for mm, m in zip(est.labels_, metres.labels_, strict=True):
+        assert np.mean(mm == m) > 0.999
     assert est.n_tracks_ == metres.n_tracks_
 
 

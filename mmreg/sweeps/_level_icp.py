@@ -182,8 +182,13 @@ def level_icp(
         n_first = n @ rotation_e  # the normals in the first sweep's frame
         arm = _cross_up(up, moved[rows] - centre)
         shifts = n_first @ across.T
+        # The turn is solved as the distance it moves the points (times their RMS arm),
+        # so that its curvature and the shifts' compare in the points' units, whatever
+        # those are (a turn's would grow with the square of the unit).
+        spread = np.sqrt(np.add.reduce(arm * arm, axis=1).mean())
+        spread = spread if spread > 0 else 1.0
         if turn:
-            jacobian = np.column_stack([np.einsum("ni,ni->n", n_first, arm), shifts])
+            jacobian = np.column_stack([np.einsum("ni,ni->n", n_first, arm) / spread, shifts])
         else:
             jacobian = shifts
         hessian = jacobian.T @ (jacobian * weight[:, None])
@@ -192,7 +197,7 @@ def level_icp(
         values, vectors = np.linalg.eigh(hessian)
         keep = values > 1e-3 * max(values.max(), np.finfo(float).tiny)
         step = -vectors[:, keep] @ ((vectors[:, keep].T @ gradient) / values[keep])
-        angle, shift = (step[0], step[1:]) if turn else (0.0, step)
+        angle, shift = (step[0] / spread, step[1:]) if turn else (0.0, step)
         rotation = _turn(angle, up)
         update = np.eye(4)
         update[:3, :3] = rotation
