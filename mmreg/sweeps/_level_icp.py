@@ -182,11 +182,11 @@ def level_icp(
         n_first = n @ rotation_e  # the normals in the first sweep's frame
         arm = _cross_up(up, moved[rows] - centre)
         shifts = n_first @ across.T
-        # The turn is solved as the distance it moves the points (times their RMS arm),
-        # so that its curvature and the shifts' compare in the points' units, whatever
-        # those are (a turn's would grow with the square of the unit).
-        spread = np.sqrt(np.add.reduce(arm * arm, axis=1).mean())
-        spread = spread if spread > 0 else 1.0
+        # The turn is solved as the distance it moves a point ``max_distance`` from the
+        # centre, so that its curvature and the shifts' compare alike in any units (in
+        # the unknown angle, a turn's curvature grows with the square of the unit; the
+        # points' own spread weighed them otherwise and lost movers in thinned sweeps).
+        spread = max_distance
         if turn:
             jacobian = np.column_stack([np.einsum("ni,ni->n", n_first, arm) / spread, shifts])
         else:
