@@ -167,10 +167,15 @@ def invalid_rows(X):
     invalid = np.isnan(X).any(axis=1)
     d = X.shape[1] // 2
     for half in (X[:, :d], X[:, d:]):
-        at_origin = ~np.any(half != 0, axis=1) & ~invalid
-        if np.count_nonzero(at_origin) > 1:
-            invalid |= at_origin
+        invalid |= _failed_returns(half, invalid)
     return invalid
+
+
+def _failed_returns(points, invalid):
+    """The rows of ``points`` at the origin (``invalid`` ones aside), where more than one
+    lies there: a LiDAR driver's failed returns; one point there is a point."""
+    at_origin = ~np.any(points != 0, axis=1) & ~invalid
+    return at_origin if np.count_nonzero(at_origin) > 1 else np.zeros_like(invalid)
 
 
 def invalid_points(points):
@@ -186,10 +191,7 @@ def invalid_points(points):
     """
     points = np.asarray(points, dtype=float)
     invalid = np.isnan(points).any(axis=1)
-    at_origin = ~np.any(points != 0, axis=1) & ~invalid
-    if np.count_nonzero(at_origin) > 1:
-        invalid |= at_origin
-    return invalid
+    return invalid | _failed_returns(points, invalid)
 
 
 def no_return(values):
