@@ -186,9 +186,9 @@ def level_icp(
         # centre, so that its curvature and the shifts' compare alike in any units (in
         # the unknown angle, a turn's curvature grows with the square of the unit; the
         # points' own spread weighed them otherwise and lost movers in thinned sweeps).
-        spread = max_distance
         if turn:
-            jacobian = np.column_stack([np.einsum("ni,ni->n", n_first, arm) / spread, shifts])
+            turning = np.einsum("ni,ni->n", n_first, arm) / max_distance
+            jacobian = np.column_stack([turning, shifts])
         else:
             jacobian = shifts
         hessian = jacobian.T @ (jacobian * weight[:, None])
@@ -197,7 +197,7 @@ def level_icp(
         values, vectors = np.linalg.eigh(hessian)
         keep = values > 1e-3 * max(values.max(), np.finfo(float).tiny)
         step = -vectors[:, keep] @ ((vectors[:, keep].T @ gradient) / values[keep])
-        angle, shift = (step[0] / spread, step[1:]) if turn else (0.0, step)
+        angle, shift = (step[0] / max_distance, step[1:]) if turn else (0.0, step)
         rotation = _turn(angle, up)
         update = np.eye(4)
         update[:3, :3] = rotation
