@@ -63,6 +63,8 @@ from mmreg.metrics import moving_iou, tracking_scores
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from real import machine_speed  # noqa: E402  (beside this file)
+
 NUSCENES = ("scene-0004", "scene-0006")
 SLOW = 0.5  # m/s: slower objects are left out of "IoU > 0.5 m/s"
 MIN_POINTS = 50
@@ -298,9 +300,14 @@ def main(argv=None):
         beams = int(beams[0]) if beams else 32
         name = f"generated {rate} Hz, " + (f"{beams} beams, " if beams != 32 else "")
         logs.append((f"{name}seed {seed}", generated_log(float(rate), int(seed), beams)))
+    # The machine's speed drifts by tens of percent over a day, KISS-ICP's less than
+    # ours: the yardstick before and after says which machine a run saw.
+    before = machine_speed()
     header = (
         f"load average at start: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs), "
-        f"python {sys.version.split()[0]}, numpy {np.__version__}"
+        f"python {sys.version.split()[0]}, numpy {np.__version__}, "
+        f"machine speed (`real.machine_speed`, a k-d tree's 8-NN pass over 100,000 "
+        f"points) {before:.3f} s before the run"
     )
     print(header, flush=True)
     rows = []
@@ -319,6 +326,7 @@ def main(argv=None):
     command = "python benchmarks/sequences.py " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
+    header += f", {machine_speed():.3f} s after"
     Path(f"{args.out}.md").write_text(
         f"# Whole logs: tracks against pairs alone\n\n`{command.strip()}`\n\n{header}\n\n"
         + markdown(table)
