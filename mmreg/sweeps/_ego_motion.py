@@ -84,8 +84,7 @@ def fine_cloud(points, origin, scale, workers=1):
 
     The points moved to ``origin`` and divided by ``scale``, on voxels of ``1 / 20``
     with the covariances of 15 neighbours: ``(PointCloud, KdTree)``. :func:`ego_motion`
-    centres each sweep on its own mean, so that a sweep of a log is laid out once for
-    both pairs it is in.
+    centres both sweeps on the first one's mean.
     """
     import small_gicp
 
@@ -249,9 +248,8 @@ def ego_motion(
         ``max_displacement`` then bounds how far off it may be.
     clouds : tuple or None, default=None
         The fine clouds of ``sweep`` and ``points``, in that order, where the caller
-        keeps them: :func:`fine_cloud` of each about its own mean
-        (``origin=sweep.mean(axis=0)``, ``points.mean(axis=0)``), this ``scale`` and
-        ``workers``. None: made here.
+        keeps them: :func:`fine_cloud` of each with ``origin=points.mean(axis=0)``, this
+        ``scale`` and ``workers``. None: made here.
 
     Returns
     -------
@@ -320,14 +318,12 @@ def ego_motion(
         if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
             raise ValueError(f"{name} must be a positive integer; got {value!r}.")
     reach = (scale if max_displacement is None else max_displacement) / scale
-    # Work in units of ``scale``, each sweep about its own centre, so that every length
-    # and tolerance inside the engine is relative (and far sweeps keep their precision);
-    # in a log each sweep's voxels then serve both pairs it is in. The motion between
-    # the two layouts absorbs the centres.
-    origin, sweep_origin = points.mean(axis=0), sweep.mean(axis=0)
-    extent = max(
-        np.abs((points - origin) / scale).max(), np.abs((sweep - sweep_origin) / scale).max()
-    )
+    # Work in units of ``scale`` about the first sweep's centre, so that every length and
+    # tolerance inside the engine is relative (and far sweeps keep their precision).
+    origin = points.mean(axis=0)
+    source_all = (points - origin) / scale
+    target_all = (sweep - origin) / scale
+    extent = max(np.abs(source_all).max(), np.abs(target_all).max())
     if extent >= _MAX_VOXELS * _FINE_VOXEL:
         raise ValueError(
             f"the sweeps reach {extent:.3g} scales from their centre, more than "
@@ -336,10 +332,7 @@ def ego_motion(
     # The fine clouds first; the coarse stages' voxel grids are drawn from them (a few
     # times fewer points than the sweeps).
     if clouds is None:
-        fine = [
-            fine_cloud(cloud, centre, scale, workers)
-            for cloud, centre in ((sweep, sweep_origin), (points, origin))
-        ]
+        fine = [fine_cloud(cloud, origin, scale, workers) for cloud in (sweep, points)]
     else:
         fine = list(clouds)
     if min(cloud.size() for cloud, _ in fine) < _MIN_POINTS:
@@ -348,12 +341,12 @@ def ego_motion(
             f"{fine[1][0].size()} and {fine[0][0].size()} (is scale in the points' units?)."
         )
     fine_points = [np.asarray(cloud.points())[:, :3] for cloud, _ in fine]
-    rotation, translation = (np.eye(3), np.zeros(3)) if init is None else check_ego_motion(init)
-    # The start (the identity: the sensor did not move) between the centred, scaled
-    # layouts: t' = (R o + t - o2) / s.
     motion = np.eye(4)
-    motion[:3, :3] = rotation
-    motion[:3, 3] = (rotation @ origin + translation - sweep_origin) / scale
+    if init is not None:
+        rotation, translation = check_ego_motion(init)
+        # The same motion in the centred, scaled frame: t' = (R o + t - o) / s.
+        motion[:3, :3] = rotation
+        motion[:3, 3] = (rotation @ origin + translation - origin) / scale
     for stage_reach in _reaches(reach):
         last = stage_reach == _FINE_REACH
         if last:
@@ -393,8 +386,8 @@ def ego_motion(
             _FINE_REACH,
         )
     rotation = motion[:3, :3].copy()
-    # Back from the centred, scaled layouts: (y - o2) / s = R (x - o) / s + t'.
-    translation = scale * motion[:3, 3] + sweep_origin - rotation @ origin
+    # Back from the centred, scaled frame: (y - o) / s = R (x - o) / s + t'.
+    translation = scale * motion[:3, 3] + origin - rotation @ origin
     # The residuals of the raw points (a voxel's centre averages their noise away), every
     # k-th one for a bounded cost.
     stride = -(-len(points) // _RESIDUAL_POINTS)
@@ -458,6 +451,7 @@ def pair_ego_motion(first, second, settings, rng, *, known=None, gicp=True):
     reach = max(tau, settings.max_displacement)
     if known is not None:  # a start within the fine stage's reach: no coarse stage
         reach = _FINE_REACH * tau
+    origin = first.centre
     rotation, translation, sigma = ego_motion(
         a,
         sweep,
@@ -465,7 +459,7 @@ def pair_ego_motion(first, second, settings, rng, *, known=None, gicp=True):
         max_displacement=reach,
         sweep_normals=normals,
         init=known,
-        clouds=(second.ego_cloud(tau), first.ego_cloud(tau)),
+        clouds=(second.ego_cloud(origin, tau), first.ego_cloud(origin, tau)),
     )
     gicp_motion = (rotation, translation)
     result = multi_body_icp(
