@@ -24,10 +24,6 @@ from mmreg.tracking._motion import transform
 _SAMPLE = 500
 # Starts refined by ICP, those with the most evidence.
 _REFINED_STARTS = 2
-# Each point of counter-evidence cancels this many of evidence: one for one, a claim's
-# net evidence. (Two for one vetoed a car passing a static wall half its size, and a car
-# passing the sensor whose side's one scan ring fell between the next sweep's rings.)
-_AGAINST = 1
 # A surface whose normal lies within about 26 degrees of the vertical (the absolute
 # cosine above this) is level: a road user's level motion slides it along itself.
 LEVEL_COSINE = 0.9
@@ -316,9 +312,11 @@ def track_claim(
         # Noise leaves a few points of a still object unexplained at rest, which a
         # small motion explains: as many as that motion leaves unexplained that the
         # ego motion explains. A moving object's evidence outweighs its counter-evidence
-        # (the static things beside it, which its motion leaves unexplained).
+        # (the static things beside it, which its motion leaves unexplained), one for
+        # one: two for one vetoed a car passing a static wall half its size, and a car
+        # passing the sensor whose side's one scan ring fell between the next sweep's.
         against = np.count_nonzero(on_near.claimed(ego, refined))
-        score = len(evidence) - _AGAINST * against
+        score = len(evidence) - against
         if score < min_evidence:
             continue
         moved = on_near.moved(refined)[0][claimed]
