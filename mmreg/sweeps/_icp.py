@@ -123,7 +123,9 @@ class SurfaceNormals:
         index = np.asarray(index, dtype=np.intp)
         missing = self._missing(index, self._spacing)
         if len(missing):
-            distance, _ = self.tree.query(self.points[missing], k=2, workers=self.workers)
+            distance, _ = self.tree.query(
+                self.points.take(missing, axis=0), k=2, workers=self.workers
+            )
             self._spacing[missing] = distance[:, 1]
         return self._spacing[index]
 
@@ -135,15 +137,18 @@ class SurfaceNormals:
         flatness is ``l_1 / l_2``: 0 on a line.
         """
         index = np.asarray(index, dtype=np.intp)
-        rows = self._table[index]
+        # ``take`` gathers rows several times faster than fancy indexing (numpy 2.4).
+        rows = self._table.take(index, axis=0)
         unknown = np.isnan(rows[:, 3])
         if unknown.any():
             missing = self._missing(index[unknown], self._table[:, 3])
-            distance, near = self.tree.query(self.points[missing], k=self.k, workers=self.workers)
+            distance, near = self.tree.query(
+                self.points.take(missing, axis=0), k=self.k, workers=self.workers
+            )
             near = near.reshape(len(missing), self.k)
             if self.k > 1:  # the nearest other point: the spacing, for free
                 self._spacing[missing] = distance.reshape(len(missing), self.k)[:, 1]
-            hood = self.points[near]
+            hood = self.points.take(near, axis=0)
             hood = hood - hood.mean(axis=1, keepdims=True)
             covariance = np.einsum("nki,nkj->nij", hood, hood)
             values, vectors = np.linalg.eigh(covariance)
@@ -155,7 +160,7 @@ class SurfaceNormals:
             self._table[missing, 4] = np.where(
                 values[:, 2] > 0, values[:, 1] / np.where(values[:, 2] > 0, values[:, 2], 1.0), 0.0
             )
-            rows[unknown] = self._table[index[unknown]]
+            rows[unknown] = self._table.take(index[unknown], axis=0)
         return rows[:, :3], rows[:, 3], rows[:, 4]
 
 
@@ -362,19 +367,22 @@ def multi_body_icp(
             points, group = every_point, every_group
         else:
             keep = alive[every_group]
-            points, group = every_point[keep], every_group[keep]
-        moved = np.einsum("nij,nj->ni", rotations[group], points) + translations[group]
+            points, group = every_point.compress(keep, axis=0), every_group[keep]
+        # ``take`` and ``compress`` gather rows several times faster than fancy indexing.
+        moved = np.einsum("nij,nj->ni", rotations.take(group, axis=0), points)
+        moved += translations.take(group, axis=0)
         distance, nearest = tree.query(moved, distance_upper_bound=bound, workers=workers)
         matched = distance <= gate[group]
         rows = np.flatnonzero(matched)
         g = group[rows]
-        p = moved[rows]
+        p = moved.take(rows, axis=0)
         normal, _, flatness = normals(nearest[rows])
         # A neighbourhood on one scan line has no normal (any direction across the line
         # fits): its "normal" would pull the points towards the other sweep's rings.
         flat = flatness >= min_flatness
-        rows, g, p, normal = rows[flat], g[flat], p[flat], normal[flat]
-        residual = np.einsum("ni,ni->n", normal, p - target[nearest[rows]])
+        rows, g = rows[flat], g[flat]
+        p, normal = p.compress(flat, axis=0), normal.compress(flat, axis=0)
+        residual = np.einsum("ni,ni->n", normal, p - target.take(nearest[rows], axis=0))
         n_matched = np.bincount(g, minlength=n_clusters)
         robust = _MAD_TO_SIGMA * _group_median(np.abs(residual), g, n_clusters)
         # Anneal from the gate down to the robust scale: where most points sit on
@@ -396,7 +404,7 @@ def multi_body_icp(
         centroid = (
             np.asarray(indicator @ (weight[:, None] * p)) / np.maximum(weight_sums, 1e-300)[:, None]
         )
-        lever = p - centroid[g]
+        lever = p - centroid.take(g, axis=0)
         jacobian = np.hstack([np.cross(lever, normal), normal])  # d r / d (omega, v)
         weighted = weight[:, None] * jacobian
         # One product sums the Hessians' lower triangles (all the eigen-solver reads),
