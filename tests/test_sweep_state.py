@@ -22,12 +22,11 @@ def _key(*arrays):
 
 
 def _count(monkeypatch, name, calls):
-    """Wrap ``name`` of the state's module: every call's points (and origin) recorded."""
+    """Wrap ``name`` of the state's module: every call's points recorded."""
     original = getattr(sweep_state, name)
 
     def counted(points, *args, **kwargs):
-        origin = args[:1] if name == "fine_cloud" else ()
-        calls.setdefault(name, []).append(_key(points, *origin))
+        calls.setdefault(name, []).append(_key(points))
         return original(points, *args, **kwargs)
 
     monkeypatch.setattr(sweep_state, name, counted)
@@ -96,10 +95,11 @@ def test_each_frame_is_computed_once(monkeypatch):
     assert len(calls["ground_mask"]) == len(frames)
     assert len(calls["voxel_islands"]) == len(frames)
     # Nothing computed twice for the same points: a tree and normals per point set (the
-    # sweep whole, and off the ground), a fine cloud per point set and centre.
+    # sweep whole, and off the ground), one ego motion's voxel cloud per frame.
     for name in COUNTED:
         assert len(set(calls[name])) == len(calls[name]), name
     assert len(calls["PointTree"]) <= 2 * len(frames)
+    assert len(calls["fine_cloud"]) == len(frames)
     # Independent fits compute the middle frames twice.
     independent = {}
     for name in COUNTED:

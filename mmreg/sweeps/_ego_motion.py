@@ -7,9 +7,10 @@ point-to-plane ICP (``mmreg.sweeps._icp.multi_body_icp``) and KISS-ICP on real A
 and on ray-cast street sweeps (``benchmarks/ego_motion.py``): it was the most accurate.
 
 Every length is a multiple of the one length the caller gives, ``scale``: the points are
-centred and divided by it before the engine sees them (small_gicp's convergence test and
-its optimiser's damping are in absolute units), so scaled inputs give the same motion, its
-translation scaled (to 1e-9 for scales from 1e-3 to 1e3: tests/test_ego_motion.py).
+moved near the origin (:func:`layout_origin`) and divided by it before the engine sees
+them (small_gicp's convergence test and its optimiser's damping are in absolute units), so
+scaled inputs give the same motion, its translation scaled (to 1e-9 for scales from 1e-3
+to 1e3: tests/test_ego_motion.py).
 
 With ``robust=True`` a last stage reweights the fine voxels' matches by a kernel of
 their Mahalanobis distances (small_gicp has none), so that moving objects lose their pull.
@@ -30,7 +31,7 @@ from scipy.spatial.transform import Rotation
 from mmreg._validation import check_ego_motion
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp, subsample_groups
 
-__all__ = ["ego_motion", "fine_cloud", "has_small_gicp", "pair_ego_motion"]
+__all__ = ["ego_motion", "fine_cloud", "has_small_gicp", "layout_origin", "pair_ego_motion"]
 
 # Fine stage, in units of ``scale`` (5 m for LiDAR in metres: 0.25 m voxels, 1 m reach,
 # small_gicp's own defaults for driving sweeps).
@@ -67,6 +68,13 @@ _DISTANCE_FLOOR = 1e-3
 _ROBUST_TOL = 1e-7
 # small_gicp's voxel grid drops points more than 2**20 voxels from the origin.
 _MAX_VOXELS = 2**20
+# The grid (in scales) that the voxels' layout origins are rounded to: a whole number of
+# fine voxels, wider than any LiDAR's reach at its scale (5 m: 5.1 km).
+_LAYOUT = 1024
+# ... and the layout's shift off it, in fine voxels: no whole fraction, so that surfaces
+# at round coordinates (a generated scene's ground at z = 0) lie inside voxels, not on
+# their faces, where rounding would put their points on either side.
+_LAYOUT_SHIFT = np.array([0.381966, 0.618034, 0.236068])
 # A pair's ego motion: GICP's motion is replaced by our ICP's when its robust residual
 # scale is below this share of GICP's (see pair_ego_motion). Measured ratios: 0.89-1.02
 # on real and ray-cast sweeps (GICP the more accurate), 0.47-0.52 on sparse resampled
@@ -79,18 +87,49 @@ def has_small_gicp():
     return importlib.util.find_spec("small_gicp") is not None
 
 
-def fine_cloud(points, origin, scale, workers=1):
+def layout_origin(points, scale):
+    """Where :func:`fine_cloud` lays out the voxels of ``points``: their mean rounded to a
+    multiple of ``_LAYOUT * scale``, shifted by a fixed fraction of a voxel.
+
+    A LiDAR sweep in its sensor's frame is laid out about that frame's origin, so the
+    two sweeps of a pair share one voxel grid, however far the sensor moved: each
+    sweep's voxels need no other sweep, and a log's sweep is laid out once for both
+    pairs it is in. Far from the frame's origin (a map's coordinates) the rounding keeps
+    the voxels' precision, and two sweeps that round apart are still laid out on one
+    grid (``_LAYOUT`` is a whole number of fine voxels).
+    """
+    step = _LAYOUT * scale
+    return np.round(np.asarray(points).mean(axis=0) / step) * step + _LAYOUT_SHIFT * (
+        _FINE_VOXEL * scale
+    )
+
+
+def fine_cloud(points, scale, workers=1):
     """small_gicp's fine cloud of ``points`` as :func:`ego_motion` makes it.
 
-    The points moved to ``origin`` and divided by ``scale``, on voxels of ``1 / 20``
-    with the covariances of 15 neighbours: ``(PointCloud, KdTree)``. :func:`ego_motion`
-    centres both sweeps on the first one's mean.
+    The points moved to :func:`layout_origin` and divided by ``scale``, on voxels of
+    ``1 / 20`` with the covariances of 15 neighbours: ``(PointCloud, KdTree, origin)``.
+
+    Raises
+    ------
+    ValueError
+        When the points reach farther from that origin than small_gicp's voxel grid
+        holds (``scale`` out of proportion with them).
     """
     import small_gicp
 
-    return small_gicp.preprocess_points(
-        (points - origin) / scale, _FINE_VOXEL, num_neighbors=_NEIGHBOURS, num_threads=workers
+    origin = layout_origin(points, scale)
+    local = (points - origin) / scale
+    extent = np.abs(local).max()
+    if extent >= _MAX_VOXELS * _FINE_VOXEL:
+        raise ValueError(
+            f"the sweeps reach {extent:.3g} scales from their layout origin, more than "
+            f"{_MAX_VOXELS * _FINE_VOXEL:.0f}; is scale={scale!r} in the points' units?"
+        )
+    cloud, tree = small_gicp.preprocess_points(
+        local, _FINE_VOXEL, num_neighbors=_NEIGHBOURS, num_threads=workers
     )
+    return cloud, tree, origin
 
 
 def _check_points(points, name):
@@ -248,8 +287,8 @@ def ego_motion(
         ``max_displacement`` then bounds how far off it may be.
     clouds : tuple or None, default=None
         The fine clouds of ``sweep`` and ``points``, in that order, where the caller
-        keeps them: :func:`fine_cloud` of each with ``origin=points.mean(axis=0)``, this
-        ``scale`` and ``workers``. None: made here.
+        keeps them: :func:`fine_cloud` of each with this ``scale`` and ``workers``. None:
+        made here.
 
     Returns
     -------
@@ -318,35 +357,25 @@ def ego_motion(
         if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
             raise ValueError(f"{name} must be a positive integer; got {value!r}.")
     reach = (scale if max_displacement is None else max_displacement) / scale
-    # Work in units of ``scale`` about the first sweep's centre, so that every length and
-    # tolerance inside the engine is relative (and far sweeps keep their precision).
-    origin = points.mean(axis=0)
-    source_all = (points - origin) / scale
-    target_all = (sweep - origin) / scale
-    extent = max(np.abs(source_all).max(), np.abs(target_all).max())
-    if extent >= _MAX_VOXELS * _FINE_VOXEL:
-        raise ValueError(
-            f"the sweeps reach {extent:.3g} scales from their centre, more than "
-            f"{_MAX_VOXELS * _FINE_VOXEL:.0f}; is scale={scale!r} in the points' units?"
-        )
-    # The fine clouds first; the coarse stages' voxel grids are drawn from them (a few
-    # times fewer points than the sweeps).
+    # Work in units of ``scale``, each sweep about its layout origin, so that every
+    # length and tolerance inside the engine is relative (and far sweeps keep their
+    # precision). The fine clouds first; the coarse stages' voxel grids are drawn from
+    # them (a few times fewer points than the sweeps).
     if clouds is None:
-        fine = [fine_cloud(cloud, origin, scale, workers) for cloud in (sweep, points)]
-    else:
-        fine = list(clouds)
+        clouds = [fine_cloud(cloud, scale, workers) for cloud in (sweep, points)]
+    fine = [(cloud, tree) for cloud, tree, _ in clouds]
+    sweep_origin, origin = clouds[0][2], clouds[1][2]
     if min(cloud.size() for cloud, _ in fine) < _MIN_POINTS:
         raise ValueError(
             f"points and sweep need at least {_MIN_POINTS} voxels of scale / 20 each; got "
             f"{fine[1][0].size()} and {fine[0][0].size()} (is scale in the points' units?)."
         )
     fine_points = [np.asarray(cloud.points())[:, :3] for cloud, _ in fine]
+    rotation, translation = (np.eye(3), np.zeros(3)) if init is None else check_ego_motion(init)
+    # The start between the two layouts: (y - o2) / s = R (x - o) / s + t'.
     motion = np.eye(4)
-    if init is not None:
-        rotation, translation = check_ego_motion(init)
-        # The same motion in the centred, scaled frame: t' = (R o + t - o) / s.
-        motion[:3, :3] = rotation
-        motion[:3, 3] = (rotation @ origin + translation - origin) / scale
+    motion[:3, :3] = rotation
+    motion[:3, 3] = (rotation @ origin + translation - sweep_origin) / scale
     for stage_reach in _reaches(reach):
         last = stage_reach == _FINE_REACH
         if last:
@@ -386,8 +415,8 @@ def ego_motion(
             _FINE_REACH,
         )
     rotation = motion[:3, :3].copy()
-    # Back from the centred, scaled frame: (y - o) / s = R (x - o) / s + t'.
-    translation = scale * motion[:3, 3] + origin - rotation @ origin
+    # Back from the scaled layouts: (y - o2) / s = R (x - o) / s + t'.
+    translation = scale * motion[:3, 3] + sweep_origin - rotation @ origin
     # The residuals of the raw points (a voxel's centre averages their noise away), every
     # k-th one for a bounded cost.
     stride = -(-len(points) // _RESIDUAL_POINTS)
@@ -451,7 +480,6 @@ def pair_ego_motion(first, second, settings, rng, *, known=None, gicp=True):
     reach = max(tau, settings.max_displacement)
     if known is not None:  # a start within the fine stage's reach: no coarse stage
         reach = _FINE_REACH * tau
-    origin = first.centre
     rotation, translation, sigma = ego_motion(
         a,
         sweep,
@@ -459,7 +487,7 @@ def pair_ego_motion(first, second, settings, rng, *, known=None, gicp=True):
         max_displacement=reach,
         sweep_normals=normals,
         init=known,
-        clouds=(second.ego_cloud(origin, tau), first.ego_cloud(origin, tau)),
+        clouds=(second.ego_cloud(tau), first.ego_cloud(tau)),
     )
     gicp_motion = (rotation, translation)
     result = multi_body_icp(

@@ -5,8 +5,8 @@ registration computes of a sweep alone -- its ground, k-d tree, surface normals,
 -- depends on its points and on lengths the registration derives from ``tau``, never on
 the other sweep: a :class:`SweepState` computes each on first use and keeps it, keyed by
 the lengths it depends on, so that one state serves every pair with the same settings,
-and the pairs give what independent fits give. The ego motion's voxel clouds are kept
-too, keyed by the centre they are laid out around (the pair's first sweep's).
+and the pairs give what independent fits give. The ego motion's voxel cloud is kept
+too: each sweep's is laid out on a grid of its own frame, one for both pairs it is in.
 
 The subsets a pair registers (the sweep without the ego vehicle's body, the points off
 the ground) are states of their own, kept by their parent and keyed by their rows: a
@@ -127,17 +127,8 @@ class SweepState:
 
         return self._cached(key, lambda: SweepState(self.points[rows], workers=self.workers))
 
-    # ------------------------------------------------------ the ego motion's clouds
-    @property
-    def centre(self):
-        """The points' mean (where the ego motion centres a pair's clouds)."""
-        return self._cached("centre", lambda: self.points.mean(axis=0))
-
-    def ego_cloud(self, origin, scale):
-        """The ego motion's fine cloud of the points about ``origin`` in units of
-        ``scale`` (:func:`~mmreg.sweeps._ego_motion.fine_cloud`), kept per both."""
-        origin = np.asarray(origin, dtype=np.float64)
-        return self._cached(
-            ("ego_cloud", origin.tobytes(), float(scale)),
-            lambda: fine_cloud(self.points, origin, scale),
-        )
+    # ------------------------------------------------------- the ego motion's cloud
+    def ego_cloud(self, scale):
+        """The ego motion's fine cloud of the points in units of ``scale``
+        (:func:`~mmreg.sweeps._ego_motion.fine_cloud`): one for both pairs."""
+        return self._cached(("ego_cloud", float(scale)), lambda: fine_cloud(self.points, scale))
