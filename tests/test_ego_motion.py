@@ -11,7 +11,7 @@ from _surfaces import area_weighted_box
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mmreg.sweeps._ego_motion import ego_motion
+from mmreg.sweeps._ego_motion import ego_motion, layout_origin
 from mmreg.sweeps._icp import rotation_vectors_to_matrices
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -123,6 +123,40 @@ def test_order_and_sizes_of_the_sweeps_do_not_matter():
     shuffled = ego_motion(a[rng.permutation(len(a))], sweep[rng.permutation(len(sweep))], scale=5)
     np.testing.assert_allclose(shuffled[0], rotation, atol=1e-9)
     np.testing.assert_allclose(shuffled[1], translation, atol=1e-9)
+
+
+@given(
+    st.floats(min_value=-3.0, max_value=3.0),
+    st.lists(st.floats(min_value=-1e6, max_value=1e6), min_size=3, max_size=3),
+)
+def test_any_two_layouts_are_one_voxel_grid(log10_scale, offset):
+    """Two point sets anywhere are laid out on one grid (their origins a whole number of
+    fine voxels apart), near their points, in proportion to the scale."""
+    scale = 10.0**log10_scale
+    rng = np.random.default_rng(0)
+    first = rng.uniform(-50, 50, (200, 3)) * scale
+    second = first + np.asarray(offset) * scale
+    o1, o2 = layout_origin(first, scale), layout_origin(second, scale)
+    voxels = (o2 - o1) / (scale / 20)
+    np.testing.assert_allclose(voxels, np.round(voxels), rtol=0, atol=1e-6 * np.abs(voxels).max())
+    assert np.all(np.abs(o2 - second.mean(axis=0)) <= 26 * scale)
+    np.testing.assert_allclose(layout_origin(first * 2, scale * 2), 2 * o1, rtol=1e-12, atol=0)
+
+
+def test_sweeps_far_from_their_frame_s_origin_give_the_same_motion():
+    """A map frame's coordinates (tens of kilometres off): the motion found there puts
+    the points where the sensor frame's does, and where the truth does (both within a
+    millimetre; the voxels fall elsewhere on the surfaces)."""
+    a, sweep, true_rotation, true_translation = sweeps([0.0, 0.01, 0.03], [-2.0, 0.5, 0.0])
+    rotation, translation, _ = ego_motion(a, sweep, scale=SCALE)
+    far = np.array([31_415.9, -27_182.8, 141.4])
+    found_rotation, found_translation, _ = ego_motion(a + far, sweep + far, scale=SCALE)
+    # Where each motion puts the points (far off, a turn's error is a shift).
+    moved = (a + far) @ found_rotation.T + found_translation - far
+    near = a @ rotation.T + translation
+    assert np.linalg.norm(moved - near, axis=1).max() < 0.005
+    truth = a @ true_rotation.T + true_translation
+    assert np.linalg.norm(moved - truth, axis=1).max() < 0.005
 
 
 def test_the_caller_s_sweep_normals_give_the_same_answer():

@@ -68,8 +68,11 @@ _DISTANCE_FLOOR = 1e-3
 _ROBUST_TOL = 1e-7
 # small_gicp's voxel grid drops points more than 2**20 voxels from the origin.
 _MAX_VOXELS = 2**20
-# The grid (in scales) that the voxels' layout origins are rounded to: a whole number of
-# fine voxels, wider than any LiDAR's reach at its scale (5 m: 5.1 km).
+# The grid (in fine voxels) that the voxels' layout origins are rounded to: 256 m at a
+# scale of 5 m, so that a LiDAR sweep in its sensor's frame (its mean within 128 m of the
+# sensor) is laid out about the sensor, and a sweep far from its frame's origin about a
+# point within 128 m of its mean (GICP's turns are about that point: far off, a turn's
+# error would weigh on its shift).
 _LAYOUT = 1024
 # ... and the layout's shift off it, in fine voxels: no whole fraction, so that surfaces
 # at round coordinates (a generated scene's ground at z = 0) lie inside voxels, not on
@@ -89,7 +92,7 @@ def has_small_gicp():
 
 def layout_origin(points, scale):
     """Where :func:`fine_cloud` lays out the voxels of ``points``: their mean rounded to a
-    multiple of ``_LAYOUT * scale``, shifted by a fixed fraction of a voxel.
+    multiple of ``_LAYOUT`` fine voxels, shifted by a fixed fraction of a voxel.
 
     A LiDAR sweep in its sensor's frame is laid out about that frame's origin, so the
     two sweeps of a pair share one voxel grid, however far the sensor moved: each
@@ -98,7 +101,7 @@ def layout_origin(points, scale):
     the voxels' precision, and two sweeps that round apart are still laid out on one
     grid (``_LAYOUT`` is a whole number of fine voxels).
     """
-    step = _LAYOUT * scale
+    step = _LAYOUT * _FINE_VOXEL * scale
     return np.round(np.asarray(points).mean(axis=0) / step) * step + _LAYOUT_SHIFT * (
         _FINE_VOXEL * scale
     )
