@@ -310,7 +310,8 @@ def ego_motion(
     ValueError
         When a point set is not ``(n, 3)`` real and finite with at least 10 points (and
         10 voxels of ``scale / 20``), a length is not positive and finite, or ``scale``
-        is out of proportion with the points (more than 52,428 scales across).
+        is out of proportion with the points (some 52,428 scales or more from their
+        :func:`layout_origin`).
     ImportError
         When small_gicp is not installed.
 
