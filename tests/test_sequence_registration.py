@@ -258,12 +258,14 @@ def test_bad_input_gets_one_clear_error(frames, kwargs, message):
 
 
 def test_online_memory_is_bounded():
-    """Only the tracks and lookahead + 2 frames are kept, however long the log."""
+    """Only the tracks, lookahead + 2 frames and the frames of the last half second (the
+    long span's) are kept, however long the log."""
     import gc
 
     from mmreg.tracking._log import LogFrame
+    from mmreg.tracking._long_span import LONG_SPAN
 
-    log = make_lidar_sequence(8, frame_rate=10.0, n_azimuths=256, random_state=0)
+    log = make_lidar_sequence(12, frame_rate=10.0, n_azimuths=256, random_state=0)
     est = SequenceRegistration(random_state=0, lookahead=1)
 
     def frames_alive():
@@ -275,8 +277,9 @@ def test_online_memory_is_bounded():
     for points, time in zip(log.frames, log.times, strict=True):
         est.partial_fit(points, time=time)
         held.append(frames_alive() - before)
-    assert max(held) <= est.lookahead + 2
-    assert held[-1] == held[3]  # flat, not growing with the log
+    span = round(LONG_SPAN * 10.0)  # frames
+    assert max(held) <= est.lookahead + 2 + span
+    assert held[-1] == held[span + 3]  # flat, not growing with the log
     est.finish()
     assert frames_alive() == before
 

@@ -122,7 +122,9 @@ class SequenceRegistration(BaseEstimator):
     -----
     The steps of a frame are described in ``docs/algorithm.md`` ("A whole log"). Each
     frame costs about one pair of :class:`~mmreg.SweepRegistration` (the tracks add a
-    tenth); memory is the tracks and ``lookahead + 2`` frames.
+    tenth); memory is the tracks, ``lookahead + 2`` frames and, with times in seconds,
+    those of the last half second (whose comparison finds walkers too slow for their
+    pairs).
 
     Examples
     --------
@@ -241,8 +243,9 @@ class SequenceRegistration(BaseEstimator):
         puts the frames it makes final in ``finished_`` (a list, usually of one, of
         Bunches with ``index``, ``time``, ``labels``, ``moving``, ``flow``, ``body``,
         ``valid``, ``pose`` and ``tracks``, as ``fit`` stores them), and
-        :meth:`finish` ends the log. Only the tracks and the last ``lookahead + 2``
-        frames are kept, so a log of any length takes the memory of a few frames.
+        :meth:`finish` ends the log. Only the tracks, the last ``lookahead + 2`` frames
+        and those of the last half second (at most 10) are kept, so a log of any length
+        takes the memory of a few frames.
 
         Parameters
         ----------

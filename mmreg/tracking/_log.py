@@ -36,6 +36,7 @@ from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
 from mmreg.sweeps._ego_body import carried_body, would_show_body
+from mmreg.sweeps._ego_motion import ego_motion, has_small_gicp
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -45,6 +46,7 @@ from mmreg.sweeps._motion_bounds import impossible_motions, max_travel
 from mmreg.sweeps._new_places import MIN_NEW_PLACE
 from mmreg.tracking._births import moved_places, new_place_share, place_starts
 from mmreg.tracking._evidence import near_points, on_level, track_claim
+from mmreg.tracking._long_span import kept_frames, long_partner, pair_motion, refuted
 from mmreg.tracking._motion import (
     compose,
     inverse,
@@ -102,6 +104,9 @@ _BODY_SPAN = 1.0
 # Where no interval in seconds is known, a place reached lies this share of tau away at
 # most (the pair's reach).
 _PLACE_REACH = 0.6
+# The ego motion over the long span is registered from the poses' within this share of
+# tau (GICP's fine stage's reach, as a pair's from a known start).
+_SPAN_REACH = 0.2
 
 
 @dataclass
@@ -330,6 +335,7 @@ class LogTracker:
             return
         pair = self._fit_pair(previous, frame, dt)
         first = previous.returns
+        old = long_partner(self._state.recent, previous) if previous.seconds else None
         predictions = self._predict(previous.time, previous.pose)
         detections = pair.detections
         overlap = overlap_matrix(
@@ -353,6 +359,18 @@ class LogTracker:
             found = self._track_detection(
                 track, previous, frame, pair, [detections[j] for j in mine], predictions[i], free
             )
+            if found is None and (track.slow or not track.confirmed) and old is not None:
+                # Too slow for its pairs (a walker): its motion over the long span.
+                found = self._long_detection(
+                    track,
+                    previous,
+                    frame,
+                    old,
+                    [detections[j] for j in mine],
+                    predictions[i],
+                    free,
+                )
+                track.slow |= found is not None
             if found is None:
                 continue
             rows, motion = found
@@ -383,7 +401,14 @@ class LogTracker:
         for rows, motion in self._moved_places(previous, frame, pair, free, dt):
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
+        if old is not None:
+            for rows, motion in self._long_places(previous, frame, old, free, dt):
+                track = self._born(previous, frame, rows, motion, dt, refit=False)
+                track.slow = True
+                seen[track.key] = len(rows)
         self._join_pieces(previous, seen, dt)
+        if previous.seconds:
+            self._state.recent = kept_frames(self._state.recent, previous)
         for track in self._confirm_and_end(previous, seen):
             self._extend_back(track, previous)
         self._carry(previous, frame)
@@ -399,23 +424,54 @@ class LogTracker:
         decides, as it does for a track's prediction. Such a track is tentative: a
         second pair must confirm it.
         """
-        first, second = previous.returns, frame.returns
+        # A road user's reach in the interval.
+        reach = max_travel(self.tau, dt) if frame.seconds else _PLACE_REACH * self.tau
+
+        def possible(claim):
+            return claim.motion if self._possible(previous, claim.rows, claim.motion, dt) else None
+
+        taken = ~(pair.sweep_ground | frame.body)
+        return self._place_claims(
+            previous, frame, pair.ego, pair.scale, taken, reach, free, possible
+        )
+
+    def _long_places(self, previous, frame, old, free, dt):
+        """Motions claimed as in :meth:`_moved_places` from the places that ``previous`` and
+        ``old`` (:data:`~mmreg.tracking._long_span.LONG_SPAN` back) leave each other
+        unexplained; each the pair's motion at the constant twist of the span's, where the
+        pair does not refute it."""
+        back, scale = self._span_ego(previous, old)
+        reach = max_travel(self.tau, previous.time - old.time)
+
+        def accepted(claim):
+            motion = self._pair_motion(previous, frame, old, claim.motion, claim.rows)
+            if refuted(previous.returns[claim.rows], previous.ego, motion, frame.target()):
+                return None
+            return motion if self._possible(previous, claim.rows, motion, dt) else None
+
+        taken = ~(old.ground | old.body)
+        return self._place_claims(previous, old, back, scale, taken, reach, free, accepted)
+
+    def _place_claims(self, previous, other, ego, scale, taken, reach, free, accept):
+        """The claims of :meth:`_moved_places` between ``previous`` and ``other`` (the
+        next sweep, or one further off): ``ego`` carries ``previous`` onto ``other``,
+        ``scale`` is its residual scale, ``taken`` marks ``other``'s rows that may have
+        moved there and ``reach`` bounds a road user's shift. ``accept(claim)`` gives
+        the motion a claim stands for, or None."""
+        first, second = previous.returns, other.returns
         cell, margin = _PLACE_CELL * self.tau, _HIDDEN * self.tau
         left, _ = moved_places(
-            first, np.flatnonzero(free), pair.ego, frame.target(), pair.scale,
-            frame.view(), margin, cell, self.min_points,
+            first, np.flatnonzero(free), ego, other.target(), scale,
+            other.view(), margin, cell, self.min_points,
         )  # fmt: skip
         if not left:
             return []
-        taken = ~(pair.sweep_ground | frame.body)
         reached, new = moved_places(
-            second, np.flatnonzero(taken), inverse(pair.ego), previous.target(), pair.scale,
+            second, np.flatnonzero(taken), inverse(ego), previous.target(), scale,
             previous.view(), margin, cell, self.min_points,
         )  # fmt: skip
         arrived = np.zeros(len(second), dtype=bool)
         arrived[new] = True
-        # A road user's reach in the interval.
-        reach = max_travel(self.tau, dt) if frame.seconds else _PLACE_REACH * self.tau
         # Each place's body: where it left only its rear, a car's whole island.
         bodies = [self._body_of(first, rows, free, cell) for rows in left]
         # The shifts of the bodies, and of the places themselves (a walker's body may be
@@ -423,11 +479,11 @@ class LogTracker:
         body_starts = place_starts(
             [first[rows] for rows in bodies],
             [second[self._body_of(second, rows, taken, cell)] for rows in reached],
-            pair.ego,
+            ego,
             reach,
         )
         own_starts = place_starts(
-            [first[rows] for rows in left], [second[rows] for rows in reached], pair.ego, reach
+            [first[rows] for rows in left], [second[rows] for rows in reached], ego, reach
         )
         starts = [a + b for a, b in zip(body_starts, own_starts, strict=True)]
         found = []
@@ -438,31 +494,115 @@ class LogTracker:
             near = near_points(first, first[rows], _NEAR * self.tau, np.flatnonzero(free))
             tight = np.union1d(near_points(first, first[rows], _TIGHT * self.tau, near), body)
             tight = tight[free[tight]]
-            claim = track_claim(
-                first,
-                near,
-                tight,
-                tries,
-                pair.ego,
-                frame.target(),
-                pair.scale,
-                max_distance=0.2 * self.tau,
-                min_evidence=self.min_points,
-                up=previous.up,
-                view=frame.view(),
-                margin=margin,
-                surface=previous.target()[2],
-            )
-            if claim is None or not self._possible(previous, claim.rows, claim.motion, dt):
+            claim = self._claim(previous, other, ego, scale, near, tight, tries, self.min_points)
+            motion = None if claim is None else accept(claim)
+            if motion is None:
                 continue
             # A repeated structure slid onto itself by one period lands on no new place.
-            landed = new_place_share(first[claim.rows], claim.motion, frame.target(), arrived)
+            landed = new_place_share(first[claim.rows], claim.motion, other.target(), arrived)
             if landed < MIN_NEW_PLACE:
                 continue
             rows = _off_the_ground(previous, claim.rows, claim.shown, _TIGHT * self.tau)
             free[rows] = False
-            found.append((rows, claim.motion))
+            found.append((rows, motion))
         return found
+
+    def _claim(self, frame, other, ego, scale, near, tight, starts, min_evidence):
+        """A track's claim (:func:`~mmreg.tracking._evidence.track_claim`) of ``frame``'s
+        points ``near`` (``tight``, its own reach) moved by one of ``starts`` onto
+        ``other``, the sweep after it or one further off; ``ego`` carries the static world
+        there and ``scale`` is its residual scale."""
+        return track_claim(
+            frame.returns,
+            near,
+            tight,
+            starts,
+            ego,
+            other.target(),
+            scale,
+            max_distance=0.2 * self.tau,
+            min_evidence=min_evidence,
+            up=frame.up,
+            view=other.view(),
+            margin=_HIDDEN * self.tau,
+            surface=frame.target()[2],
+        )
+
+    def _span_ego(self, previous, old):
+        """The ego motion from ``previous`` to ``old`` (4 x 4) and its residual scale,
+        registered once per pair from the poses' (their errors add up over the span), where
+        the pair estimator keeps each sweep's voxels; else the poses' own, the pairs'
+        scales added."""
+        key = (previous.index, old.index)
+        if self._state.span_ego[0] == key:
+            return self._state.span_ego[1]
+        back = compose(inverse(old.pose), previous.pose)
+        scale = (previous.index - old.index) * max(previous.scale, old.scale)
+        if previous.state is not None and old.state is not None and has_small_gicp():
+            rotation, translation, scale = ego_motion(
+                previous.returns,
+                old.returns,
+                scale=self.tau,
+                max_displacement=_SPAN_REACH * self.tau,
+                sweep_normals=old.target()[2],
+                init=(back[:3, :3], back[:3, 3]),
+                clouds=(old.state.ego_cloud(self.tau), previous.state.ego_cloud(self.tau)),
+            )
+            back = to_matrix(rotation, translation)
+        self._state.span_ego = (key, (back, scale))
+        return back, scale
+
+    def _pair_motion(self, previous, frame, old, back, rows):
+        """The pair's motion of ``previous``'s ``rows`` at the twist of ``back``, their
+        motion to ``old``."""
+        centre = transform(previous.pose, previous.returns[rows]).mean(axis=0)
+        poses = (previous.pose, frame.pose, old.pose)
+        return pair_motion(
+            back, poses, centre, previous.time - old.time, frame.time - previous.time
+        )
+
+    def _long_detection(self, track, previous, frame, old, clusters, prediction, free):
+        """``track``'s points in ``previous`` and their pair motion, claimed over the long
+        span (``old`` to ``previous``) where the pair showed none, or None. ``clusters``:
+        the pair's moving clusters over its prediction."""
+        points, radius = prediction
+        first = previous.returns
+        centre = transform(previous.pose, points).mean(axis=0)
+        own = np.concatenate([rows for rows, _ in clusters]) if clusters else np.zeros(0, int)
+        near = np.union1d(near_points(first, points, radius, np.flatnonzero(free)), own)
+        tight = np.union1d(near_points(first, points, _TIGHT * self.tau, near), own)
+        if len(tight):
+            # Its whole body, as for a place left: a track born on a car's rear (its only
+            # place left in a pair) grows to the car that the span shows moving.
+            tight = np.union1d(tight, self._body_of(first, tight, free, _PLACE_CELL * self.tau))
+        span = previous.time - old.time
+        starts = [
+            compose(
+                inverse(old.pose),
+                predicted_motion(track.omega, track.velocity, centre, -span * speed),
+                previous.pose,
+            )
+            for speed in _SPEEDS
+        ]
+        needed = self.min_points // 2 if track.confirmed else self.min_points
+        needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
+        claim = self._claim(
+            previous, old, *self._span_ego(previous, old), near, tight, starts, needed
+        )
+        if claim is None:
+            return None
+        rows = _off_the_ground(previous, claim.rows, claim.shown, _TIGHT * self.tau)
+        if not len(rows):
+            return None
+        motion = self._pair_motion(previous, frame, old, claim.motion, rows)
+        if refuted(first[rows], previous.ego, motion, frame.target()):
+            return None
+        dt = frame.time - previous.time
+        if not self._follows(track, previous, frame, rows, motion):
+            return None
+        if not self._possible(previous, rows, motion, dt):
+            return None
+        return rows, motion
 
     def _body_of(self, points, rows, free, cell):
         """The ``free`` points of the islands (voxels of side ``cell``) that hold ``rows``,
@@ -702,19 +842,7 @@ class LogTracker:
         needed = min_points // 2 if track.confirmed else min_points
         needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
         claim_from = functools.partial(
-            track_claim,
-            first,
-            near,
-            tight,
-            ego=pair.ego,
-            target=frame.target(),
-            scale=pair.scale,
-            max_distance=0.2 * self.tau,
-            min_evidence=needed,
-            up=previous.up,
-            view=frame.view(),
-            margin=_HIDDEN * self.tau,
-            surface=previous.target()[2],
+            self._claim, previous, frame, pair.ego, pair.scale, near, tight, min_evidence=needed
         )
         claim = claim_from(predicted + [motion for _, motion in clusters])
         if (
@@ -768,7 +896,7 @@ class LogTracker:
         previous.track_of[rows] = track.key
         previous.motions[track.key] = motion
 
-    def _born(self, previous, frame, rows, motion, dt):
+    def _born(self, previous, frame, rows, motion, dt, refit=True):
         """A tentative track for a moving cluster no track holds.
 
         In z-up sweeps its motion is fitted again, level (a turn about the vertical and
@@ -777,7 +905,7 @@ class LogTracker:
         """
         state = self._state
         first = previous.returns
-        if previous.up is not None:
+        if previous.up is not None and refit:
             level = level_part(motion, previous.ego, first[rows].mean(axis=0), previous.up)
             motion = level_icp(
                 first[rows],
@@ -877,21 +1005,8 @@ class LogTracker:
             free = ~(frame.ground | frame.body) & (frame.track_of < 0)
             near = near_points(first, prediction, _NEAR * self.tau, np.flatnonzero(free))
             tight = near_points(first, prediction, _TIGHT * self.tau, near)
-            claim = track_claim(
-                first,
-                near,
-                tight,
-                starts,
-                frame.ego,
-                later.target(),
-                frame.scale,
-                max_distance=0.2 * self.tau,
-                min_evidence=min(self.min_points, max(_MIN_EVIDENCE, len(points) // 4)),
-                up=frame.up,
-                view=later.view(),
-                margin=_HIDDEN * self.tau,
-                surface=frame.target()[2],
-            )
+            needed = min(self.min_points, max(_MIN_EVIDENCE, len(points) // 4))
+            claim = self._claim(frame, later, frame.ego, frame.scale, near, tight, starts, needed)
             if claim is None or not self._possible(frame, claim.rows, claim.motion, dt):
                 return
             frame.track_of[claim.rows] = track.key
@@ -1060,6 +1175,8 @@ class _LogState:
     bodiless: int = 0  # pairs in a row that would have shown the ego body and showed none
 
     last_first: LogFrame | None = None  # the last frame that was a pair's first sweep
+    recent: list = field(default_factory=list)  # past first sweeps, for the long span
+    span_ego: tuple = ((-1, -1), None)  # (first, earlier frame) -> their ego motion, scale
 
 
 @dataclass

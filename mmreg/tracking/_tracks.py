@@ -39,6 +39,9 @@ class Track:
     # The confirmed track that missed, in the pair this one was born in, the cluster it was
     # born on over its prediction (-1: none): confirmed, this one goes on with its id.
     heir_of: int = -1
+    # Found over the long span (frames half a second apart), where its pairs show nothing:
+    # it is followed there too.
+    slow: bool = False
 
     def __post_init__(self):
         if self.first_frame < 0:
