@@ -386,32 +386,48 @@ class LogTracker:
         for j, (rows, motion) in detections.items():
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
-            missed = [
-                i
-                for i in order
-                if tracks[i].confirmed
-                and tracks[i].key not in seen
-                and tracks[i].key not in heirs
-                and overlap[column[j], i] >= _MIN_OVERLAP
-            ]
-            if missed:
-                track.heir_of = tracks[max(missed, key=lambda i: overlap[column[j], i])].key
-                heirs.add(track.heir_of)
+            self._inherit(track, overlap[column[j]], order, seen, heirs)
         # Objects the pair's clusters called static that left a place and reached one.
         for rows, motion in self._moved_places(previous, frame, pair, free, dt):
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
         if old is not None:
+            # ... and half a second back; one over the prediction of a confirmed track that
+            # this pair missed is that object too (a car going out of view).
             for rows, motion in self._long_places(previous, frame, old, free, dt):
                 track = self._born(previous, frame, rows, motion, dt, refit=False)
                 track.slow = True
                 seen[track.key] = len(rows)
+                cover = overlap_matrix(
+                    [first[rows]],
+                    [points for points, _ in predictions],
+                    [radius for _, radius in predictions],
+                )[0]
+                self._inherit(track, cover, order, seen, heirs)
         self._join_pieces(previous, seen, dt)
         if previous.seconds:
             self._state.recent = kept_frames(self._state.recent, previous)
         for track in self._confirm_and_end(previous, seen):
             self._extend_back(track, previous)
         self._carry(previous, frame)
+
+    def _inherit(self, track, cover, order, seen, heirs):
+        """Make the new ``track`` the heir of the confirmed track, not seen in this pair
+        (``seen``) nor inherited yet (``heirs``, which it joins), whose prediction covers
+        the most of its points (``cover``: share per track, in ``order``), if any covers
+        ``_MIN_OVERLAP``."""
+        tracks = self._state.tracks
+        missed = [
+            i
+            for i in order
+            if tracks[i].confirmed
+            and tracks[i].key not in seen
+            and tracks[i].key not in heirs
+            and cover[i] >= _MIN_OVERLAP
+        ]
+        if missed:
+            track.heir_of = tracks[max(missed, key=lambda i: cover[i])].key
+            heirs.add(track.heir_of)
 
     def _moved_places(self, previous, frame, pair, free, dt):
         """Motions claimed from the places the ego motion leaves unexplained
