@@ -392,18 +392,17 @@ class LogTracker:
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
         if old is not None:
-            # ... and half a second back; one over the prediction of a confirmed track that
-            # this pair missed is that object too (a car going out of view).
-            for rows, motion in self._long_places(previous, frame, old, free, dt):
+            # ... and half a second back, but where a confirmed track that this pair
+            # missed is predicted: that object coasts (a car going out of view).
+            open_ = free.copy()
+            for i in order:
+                if tracks[i].confirmed and tracks[i].key not in seen:
+                    points, radius = predictions[i]
+                    open_[near_points(first, points, radius, np.flatnonzero(open_))] = False
+            for rows, motion in self._long_places(previous, frame, old, open_, dt):
                 track = self._born(previous, frame, rows, motion, dt, refit=False)
                 track.slow = True
                 seen[track.key] = len(rows)
-                cover = overlap_matrix(
-                    [first[rows]],
-                    [points for points, _ in predictions],
-                    [radius for _, radius in predictions],
-                )[0]
-                self._inherit(track, cover, order, seen, heirs)
         self._join_pieces(previous, seen, dt)
         if previous.seconds:
             self._state.recent = kept_frames(self._state.recent, previous)
