@@ -133,3 +133,28 @@ def test_a_walker_too_slow_for_its_pairs_is_followed_over_half_a_second(monkeypa
     alone = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
     for k in range(10):
         assert not alone.moving_[k][log.labels[k] == walker].any()
+
+
+def test_a_car_that_stopped_is_static_though_it_moved_half_a_second_ago(monkeypatch):
+    log = make_lidar_sequence(
+        16,
+        frame_rate=10.0,
+        n_moving=0,
+        n_braking=1,
+        n_overtaking=0,
+        n_walkers=0,
+        n_cyclists=0,
+        n_standing=0,
+        random_state=1,
+    )
+    car = next(i for i, kind in enumerate(log.kinds) if kind == "car")
+    stopped = log.objects.loc[(log.objects.id == car) & ~log.objects.moving, "frame"]
+    assert stopped.min() < 10  # at rest for six frames or more
+    est = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+    for k in stopped:
+        assert not est.moving_[k][log.labels[k] == car].any()
+    # Over half a second it still moved: without the pair's word, it would move on.
+    monkeypatch.setattr("mmreg.tracking._log.refuted", lambda *args: False)
+    unrefuted = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+    held = [unrefuted.moving_[k][log.labels[k] == car].mean() for k in stopped]
+    assert max(held) > 0.5
