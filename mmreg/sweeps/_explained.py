@@ -42,7 +42,10 @@ def spacing_ratio(points, tree, sweep, normals=None):
         unique, inverse = np.unique(nearest, return_inverse=True)
         spacing = tree.query(sweep[unique], k=2)[0][:, 1][inverse.ravel()]
     spacing = np.maximum(spacing, np.finfo(float).tiny)
-    return distance / spacing, nearest, spacing
+    # Where the sweep repeats a point (spacing 0), any distance is infinitely many
+    # spacings: the overflow to inf is the answer, not a fault.
+    with np.errstate(over="ignore"):
+        return distance / spacing, nearest, spacing
 
 
 def unexplained_mask(points, tree, sweep, normals, scale):
