@@ -24,6 +24,7 @@ frames are kept.
 import functools
 import inspect
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -335,7 +336,7 @@ class LogTracker:
             return
         pair = self._fit_pair(previous, frame, dt)
         first = previous.returns
-        old = long_partner(self._state.recent, previous) if previous.seconds else None
+        span = self._span(previous)
         predictions = self._predict(previous.time, previous.pose)
         detections = pair.detections
         overlap = overlap_matrix(
@@ -359,13 +360,13 @@ class LogTracker:
             found = self._track_detection(
                 track, previous, frame, pair, [detections[j] for j in mine], predictions[i], free
             )
-            if found is None and (track.slow or not track.confirmed) and old is not None:
+            if found is None and (track.slow or not track.confirmed) and span is not None:
                 # Too slow for its pairs (a walker): its motion over the long span.
                 found = self._long_detection(
                     track,
                     previous,
                     frame,
-                    old,
+                    span,
                     [detections[j] for j in mine],
                     predictions[i],
                     free,
@@ -391,7 +392,7 @@ class LogTracker:
         for rows, motion in self._moved_places(previous, frame, pair, free, dt):
             track = self._born(previous, frame, rows, motion, dt)
             seen[track.key] = len(rows)
-        if old is not None:
+        if span is not None:
             # ... and half a second back, but where a confirmed track that this pair
             # missed is predicted: that object coasts (a car going out of view).
             open_ = free.copy()
@@ -399,7 +400,7 @@ class LogTracker:
                 if tracks[i].confirmed and tracks[i].key not in seen:
                     points, radius = predictions[i]
                     open_[near_points(first, points, radius, np.flatnonzero(open_))] = False
-            for rows, motion in self._long_places(previous, frame, old, open_, dt):
+            for rows, motion in self._long_places(previous, frame, span, open_, dt):
                 track = self._born(previous, frame, rows, motion, dt, refit=False)
                 track.slow = True
                 seen[track.key] = len(rows)
@@ -450,22 +451,24 @@ class LogTracker:
             previous, frame, pair.ego, pair.scale, taken, reach, free, possible
         )
 
-    def _long_places(self, previous, frame, old, free, dt):
+    def _long_places(self, previous, frame, span, free, dt):
         """Motions claimed as in :meth:`_moved_places` from the places that ``previous`` and
-        ``old`` (:data:`~mmreg.tracking._long_span.LONG_SPAN` back) leave each other
-        unexplained; each the pair's motion at the constant twist of the span's, where the
-        pair does not refute it."""
-        back, scale = self._span_ego(previous, old)
+        the frame of ``span`` (:data:`~mmreg.tracking._long_span.LONG_SPAN` back) leave each
+        other unexplained; each the pair's motion at the constant twist of the span's, where
+        the pair does not refute it."""
+        old = span.frame
         reach = max_travel(self.tau, previous.time - old.time)
 
         def accepted(claim):
-            motion = self._pair_motion(previous, frame, old, claim.motion, claim.rows)
+            motion = self._pair_motion(previous, frame, span, claim.motion, claim.rows)
             if refuted(previous.returns[claim.rows], previous.ego, motion, frame.target()):
                 return None
             return motion if self._possible(previous, claim.rows, motion, dt) else None
 
         taken = ~(old.ground | old.body)
-        return self._place_claims(previous, old, back, scale, taken, reach, free, accepted)
+        return self._place_claims(
+            previous, old, span.back, span.scale, taken, reach, free, accepted
+        )
 
     def _place_claims(self, previous, other, ego, scale, taken, reach, free, accept):
         """The claims of :meth:`_moved_places` between ``previous`` and ``other`` (the
@@ -543,14 +546,15 @@ class LogTracker:
             surface=frame.target()[2],
         )
 
-    def _span_ego(self, previous, old):
-        """The ego motion from ``previous`` to ``old`` (4 x 4) and its residual scale,
-        registered once per pair from the poses' (their errors add up over the span), where
-        the pair estimator keeps each sweep's voxels; else the poses' own, the pairs'
-        scales added."""
-        key = (previous.index, old.index)
-        if self._state.span_ego[0] == key:
-            return self._state.span_ego[1]
+    def _span(self, previous):
+        """The long span of the pair whose first sweep is ``previous``, or None (no frame
+        half a second back, or times not in seconds): the frame, and the ego motion from
+        ``previous`` to it (4 x 4) and its residual scale, registered from the poses'
+        (their errors add up over the span) where the pair estimator keeps each sweep's
+        voxels, else the poses' own, the pairs' scales added."""
+        old = long_partner(self._state.recent, previous) if previous.seconds else None
+        if old is None:
+            return None
         back = compose(inverse(old.pose), previous.pose)
         scale = (previous.index - old.index) * max(previous.scale, old.scale)
         if previous.state is not None and old.state is not None and has_small_gicp():
@@ -564,52 +568,38 @@ class LogTracker:
                 clouds=(old.state.ego_cloud(self.tau), previous.state.ego_cloud(self.tau)),
             )
             back = to_matrix(rotation, translation)
-        self._state.span_ego = (key, (back, scale))
-        return back, scale
+        return _Span(old, back, scale)
 
-    def _pair_motion(self, previous, frame, old, back, rows):
+    def _pair_motion(self, previous, frame, span, back, rows):
         """The pair's motion of ``previous``'s ``rows`` at the twist of ``back``, their
-        motion to ``old``."""
+        motion to the frame of ``span``."""
+        old = span.frame
         centre = transform(previous.pose, previous.returns[rows]).mean(axis=0)
         poses = (previous.pose, frame.pose, old.pose)
         return pair_motion(
             back, poses, centre, previous.time - old.time, frame.time - previous.time
         )
 
-    def _long_detection(self, track, previous, frame, old, clusters, prediction, free):
+    def _long_detection(self, track, previous, frame, span, clusters, prediction, free):
         """``track``'s points in ``previous`` and their pair motion, claimed over the long
-        span (``old`` to ``previous``) where the pair showed none, or None. ``clusters``:
-        the pair's moving clusters over its prediction."""
-        points, radius = prediction
+        ``span`` (its frame to ``previous``) where the pair showed none, or None.
+        ``clusters``: the pair's moving clusters over its prediction."""
+        old = span.frame
         first = previous.returns
-        centre = transform(previous.pose, points).mean(axis=0)
-        own = np.concatenate([rows for rows, _ in clusters]) if clusters else np.zeros(0, int)
-        near = np.union1d(near_points(first, points, radius, np.flatnonzero(free)), own)
-        tight = np.union1d(near_points(first, points, _TIGHT * self.tau, near), own)
+        _, near, tight, starts, needed = self._around_prediction(
+            track, previous, old, old.time - previous.time, prediction, clusters, free
+        )
         if len(tight):
             # Its whole body, as for a place left: a track born on a car's rear (its only
             # place left in a pair) grows to the car that the span shows moving.
             tight = np.union1d(tight, self._body_of(first, tight, free, _PLACE_CELL * self.tau))
-        span = previous.time - old.time
-        starts = [
-            compose(
-                inverse(old.pose),
-                predicted_motion(track.omega, track.velocity, centre, -span * speed),
-                previous.pose,
-            )
-            for speed in _SPEEDS
-        ]
-        needed = self.min_points // 2 if track.confirmed else self.min_points
-        needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
-        claim = self._claim(
-            previous, old, *self._span_ego(previous, old), near, tight, starts, needed
-        )
+        claim = self._claim(previous, old, span.back, span.scale, near, tight, starts, needed)
         if claim is None:
             return None
         rows = _off_the_ground(previous, claim.rows, claim.shown, _TIGHT * self.tau)
         if not len(rows):
             return None
-        motion = self._pair_motion(previous, frame, old, claim.motion, rows)
+        motion = self._pair_motion(previous, frame, span, claim.motion, rows)
         if refuted(first[rows], previous.ego, motion, frame.target()):
             return None
         dt = frame.time - previous.time
@@ -832,30 +822,9 @@ class LogTracker:
         """
         dt = frame.time - previous.time
         first = previous.returns
-        points, radius = prediction
-        centre = transform(previous.pose, points).mean(axis=0)
-        own = (
-            np.concatenate([rows for rows, _ in clusters])
-            if clusters
-            else np.zeros(0, dtype=np.intp)
+        own, near, tight, predicted, needed = self._around_prediction(
+            track, previous, frame, dt, prediction, clusters, free
         )
-        near = np.union1d(near_points(first, points, radius, np.flatnonzero(free)), own)
-        tight = np.union1d(near_points(first, points, _TIGHT * self.tau, near), own)
-        # The prediction, the same twist slower or faster (a car brakes at a light,
-        # pulls away): starts for the track's ICP, with the clusters' own motions.
-        predicted = [
-            compose(
-                inverse(frame.pose),
-                predicted_motion(track.omega, track.velocity, centre, dt * speed),
-                previous.pose,
-            )
-            for speed in _SPEEDS
-        ]
-        min_points = self.min_points
-        # A confirmed track needs less new evidence (its past shows it moves), and a
-        # small object (a walker of 20 points) a quarter of its points.
-        needed = min_points // 2 if track.confirmed else min_points
-        needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
         claim_from = functools.partial(
             self._claim, previous, frame, pair.ego, pair.scale, near, tight, min_evidence=needed
         )
@@ -894,6 +863,37 @@ class LogTracker:
         if not self._possible(previous, rows, motion, dt):
             return None
         return rows, motion
+
+    def _around_prediction(self, track, previous, other, dt, prediction, clusters, free):
+        """What a claim of ``track`` in ``previous`` onto ``other``, ``dt`` later (or
+        earlier), starts from: the rows of its ``clusters``; the ``free`` rows near its
+        ``prediction`` (and the clusters'), and those within its own points' reach; the
+        motions of its twist at each of ``_SPEEDS``; and the evidence it needs."""
+        first = previous.returns
+        points, radius = prediction
+        centre = transform(previous.pose, points).mean(axis=0)
+        own = (
+            np.concatenate([rows for rows, _ in clusters])
+            if clusters
+            else np.zeros(0, dtype=np.intp)
+        )
+        near = np.union1d(near_points(first, points, radius, np.flatnonzero(free)), own)
+        tight = np.union1d(near_points(first, points, _TIGHT * self.tau, near), own)
+        # The prediction, the same twist slower or faster (a car brakes at a light,
+        # pulls away): starts for the track's ICP.
+        starts = [
+            compose(
+                inverse(other.pose),
+                predicted_motion(track.omega, track.velocity, centre, dt * speed),
+                previous.pose,
+            )
+            for speed in _SPEEDS
+        ]
+        # A confirmed track needs less new evidence (its past shows it moves), and a
+        # small object (a walker of 20 points) a quarter of its points.
+        needed = self.min_points // 2 if track.confirmed else self.min_points
+        needed = min(needed, max(_MIN_EVIDENCE, len(track.points) // 4))
+        return own, near, tight, starts, needed
 
     def _follows(self, track, previous, frame, rows, motion):
         """Whether ``motion`` of ``previous``'s points ``rows`` follows ``track``'s."""
@@ -1191,7 +1191,14 @@ class _LogState:
 
     last_first: LogFrame | None = None  # the last frame that was a pair's first sweep
     recent: list = field(default_factory=list)  # past first sweeps, for the long span
-    span_ego: tuple = ((-1, -1), None)  # (first, earlier frame) -> their ego motion, scale
+
+
+class _Span(NamedTuple):
+    """A pair's long span: the frame half a second back, and the ego motion to it."""
+
+    frame: LogFrame
+    back: np.ndarray  # 4 x 4, the pair's first sweep to ``frame``
+    scale: float  # its robust residual scale
 
 
 @dataclass

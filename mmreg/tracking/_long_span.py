@@ -13,8 +13,8 @@ that has stopped since moved in the span, and its pair shows it standing.
 
 import numpy as np
 
-from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
-from mmreg.tracking._motion import compose, inverse, predicted_motion, transform, twist_of
+from mmreg.tracking._evidence import _Answers
+from mmreg.tracking._motion import compose, inverse, predicted_motion, twist_of
 
 __all__ = ["LONG_SPAN", "kept_frames", "long_partner", "pair_motion", "refuted"]
 
@@ -87,9 +87,9 @@ def pair_motion(back, poses, centre, span, dt):
 def refuted(points, ego, motion, target):
     """Whether the next sweep refutes ``motion`` of ``points`` against the ego motion.
 
-    It does when more of the points lie on it (within ``EXPLAINED_SPACINGS`` of its
-    spacings) where ``ego`` puts them and not where ``motion`` does than the other way
-    round. ``target``: ``(sweep, tree, normals)`` of the next sweep.
+    It does when more of the points lie on it (within two of its spacings, as a claim
+    counts them) where ``ego`` puts them and not where ``motion`` does than the other
+    way round. ``target``: ``(sweep, tree, normals)`` of the next sweep.
 
     Examples
     --------
@@ -107,9 +107,6 @@ def refuted(points, ego, motion, target):
     >>> refuted(box, np.eye(4), shift, standing), refuted(box, np.eye(4), shift, gone)
     (True, False)
     """
-    sweep, tree, normals = target
-    on_ego = spacing_ratio(transform(ego, points), tree, sweep, normals)[0] <= EXPLAINED_SPACINGS
-    on_motion = (
-        spacing_ratio(transform(motion, points), tree, sweep, normals)[0] <= EXPLAINED_SPACINGS
-    )
+    answers = _Answers(points, target, scale=None)
+    on_ego, on_motion = answers.explained(ego), answers.explained(motion)
     return bool(np.count_nonzero(on_ego & ~on_motion) > np.count_nonzero(on_motion & ~on_ego))
