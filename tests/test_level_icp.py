@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from mmreg.sweeps._icp import SurfaceNormals
-from mmreg.sweeps._level_icp import level_icp
+from mmreg.sweeps._level_icp import _median, level_icp
 
 
 def _box(n, rng):
@@ -39,3 +39,10 @@ def test_a_box_s_turn_and_shift_are_found_in_any_units(yaw, shift, scale):
     found_yaw = np.arctan2(fit.motion[1, 0], fit.motion[0, 0])
     assert abs(found_yaw - yaw) < 2e-3
     assert np.abs(fit.motion[:3, 3] / scale - moved).max() < 0.01
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(0, 1e6, allow_subnormal=False), min_size=1, max_size=60))
+def test_the_steps_median_is_numpys_to_the_bit(values):
+    values = np.array(values)
+    assert _median(values) == float(np.median(values))

@@ -27,6 +27,7 @@ from sklearn.utils import check_random_state
 
 # The same median as the command line's motion statistics (the mean of the two middle values).
 from mmreg._array.motion import _group_median
+from mmreg._array.symmetric3 import least_eigenvectors
 
 __all__ = ["ICPResult", "SurfaceNormals", "multi_body_icp", "rotation_vectors_to_matrices"]
 
@@ -149,10 +150,10 @@ class SurfaceNormals:
             if self.k > 1:  # the nearest other point: the spacing, for free
                 self._spacing[missing] = distance.reshape(len(missing), self.k)[:, 1]
             hood = self.points.take(near, axis=0)
-            hood = hood - hood.mean(axis=1, keepdims=True)
-            covariance = np.einsum("nki,nkj->nij", hood, hood)
-            values, vectors = np.linalg.eigh(covariance)
-            self._table[missing, :3] = vectors[:, :, 0]
+            hood -= hood.mean(axis=1, keepdims=True)
+            covariance = np.matmul(hood.transpose(0, 2, 1), hood)
+            values, normal = least_eigenvectors(covariance)
+            self._table[missing, :3] = normal
             total = values.sum(axis=1)
             self._table[missing, 3] = np.where(
                 total > 0, values[:, 0] / np.where(total > 0, total, 1.0), 0.0

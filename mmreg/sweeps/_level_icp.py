@@ -33,6 +33,16 @@ def _cross_up(up, vectors):
     return np.stack([up[1] * z - up[2] * y, up[2] * x - up[0] * z, up[0] * y - up[1] * x], axis=1)
 
 
+def _median(values):
+    """``np.median`` of a 1-D array of numbers, the same float, without its overhead
+    (a tenth of a step's time on the few dozen points of a claim's ICP)."""
+    half = len(values) // 2
+    if len(values) % 2:
+        return float(np.partition(values, half)[half])
+    low, high = np.partition(values, (half - 1, half))[half - 1 : half + 1]
+    return float((low + high) / 2)
+
+
 def _turn(angle, up):
     """Rotation by ``angle`` about the unit vector ``up`` (Rodrigues)."""
     cross = np.array([[0.0, -up[2], up[1]], [up[2], 0.0, -up[0]], [-up[1], up[0], 0.0]])
@@ -167,7 +177,7 @@ def level_icp(
         # The kernel starts as wide as the reach and narrows to the robust scale (as
         # mmreg.sweeps._icp anneals it): a narrow kernel at the start would drop the very
         # points that show how far the object moved.
-        robust = max(_MAD_TO_SIGMA * float(np.median(np.abs(residual))), min_scale * max_distance)
+        robust = max(_MAD_TO_SIGMA * _median(np.abs(residual)), min_scale * max_distance)
         scale = max_distance / _KERNEL if scale is None else scale
         scale = max(robust, _ANNEAL * scale)
         u = residual / (_KERNEL * scale)
