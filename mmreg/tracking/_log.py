@@ -37,7 +37,6 @@ from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
 from mmreg.sweeps._ego_body import carried_body, would_show_body
-from mmreg.sweeps._ego_motion import ego_motion, has_small_gicp
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -105,9 +104,6 @@ _BODY_SPAN = 1.0
 # Where no interval in seconds is known, a place reached lies this share of tau away at
 # most (the pair's reach).
 _PLACE_REACH = 0.6
-# The ego motion over the long span is registered from the poses' within this share of
-# tau (GICP's fine stage's reach, as a pair's from a known start).
-_SPAN_REACH = 0.2
 
 
 @dataclass
@@ -548,26 +544,20 @@ class LogTracker:
 
     def _span(self, previous):
         """The long span of the pair whose first sweep is ``previous``, or None (no frame
-        half a second back, or times not in seconds): the frame, and the ego motion from
-        ``previous`` to it (4 x 4) and its residual scale, registered from the poses'
-        (their errors add up over the span) where the pair estimator keeps each sweep's
-        voxels, else the poses' own, the pairs' scales added."""
+        half a second back, or times not in seconds): the frame, the ego motion from
+        ``previous`` to it (4 x 4, the chained poses') and its residual scale (the pairs'
+        scales added).
+
+        The poses' errors add up over the span, but registering the span's ego motion
+        again (GICP from the chained poses') changed no figure: not on the generated
+        10 Hz logs, nor on the nuScenes logs run with times at 10 Hz, whose spans then
+        hold 2.5 s of real motion and 10-25 m of the car's travel.
+        """
         old = long_partner(self._state.recent, previous) if previous.seconds else None
         if old is None:
             return None
         back = compose(inverse(old.pose), previous.pose)
         scale = (previous.index - old.index) * max(previous.scale, old.scale)
-        if previous.state is not None and old.state is not None and has_small_gicp():
-            rotation, translation, scale = ego_motion(
-                previous.returns,
-                old.returns,
-                scale=self.tau,
-                max_displacement=_SPAN_REACH * self.tau,
-                sweep_normals=old.target()[2],
-                init=(back[:3, :3], back[:3, 3]),
-                clouds=(old.state.ego_cloud(self.tau), previous.state.ego_cloud(self.tau)),
-            )
-            back = to_matrix(rotation, translation)
         return _Span(old, back, scale)
 
     def _pair_motion(self, previous, frame, span, back, rows):
@@ -1198,7 +1188,7 @@ class _Span(NamedTuple):
 
     frame: LogFrame
     back: np.ndarray  # 4 x 4, the pair's first sweep to ``frame``
-    scale: float  # its robust residual scale
+    scale: float  # its residual scale, the pairs' added
 
 
 @dataclass
