@@ -457,7 +457,7 @@ class LogTracker:
 
         def accepted(claim):
             motion = self._pair_motion(previous, frame, span, claim.motion, claim.rows)
-            if refuted(previous.returns[claim.rows], previous.ego, motion, frame.target()):
+            if motion is None:
                 return None
             return motion if self._possible(previous, claim.rows, motion, dt) else None
 
@@ -562,13 +562,17 @@ class LogTracker:
 
     def _pair_motion(self, previous, frame, span, back, rows):
         """The pair's motion of ``previous``'s ``rows`` at the twist of ``back``, their
-        motion to the frame of ``span``."""
+        motion to the frame of ``span``; None where the pair refutes it (the object has
+        stopped since, :func:`~mmreg.tracking._long_span.refuted`)."""
         old = span.frame
         centre = transform(previous.pose, previous.returns[rows]).mean(axis=0)
         poses = (previous.pose, frame.pose, old.pose)
-        return pair_motion(
+        motion = pair_motion(
             back, poses, centre, previous.time - old.time, frame.time - previous.time
         )
+        if refuted(previous.returns[rows], previous.ego, motion, frame.target()):
+            return None
+        return motion
 
     def _long_detection(self, track, previous, frame, span, clusters, prediction, free):
         """``track``'s points in ``previous`` and their pair motion, claimed over the long
@@ -590,7 +594,7 @@ class LogTracker:
         if not len(rows):
             return None
         motion = self._pair_motion(previous, frame, span, claim.motion, rows)
-        if refuted(first[rows], previous.ego, motion, frame.target()):
+        if motion is None:
             return None
         dt = frame.time - previous.time
         if not self._follows(track, previous, frame, rows, motion):
