@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial import cKDTree
 
-from mmreg._array.unique_rows import unique_rows
+from mmreg._array.unique_rows import prefix_counts, unique_rows
 from mmreg.sweeps._icp import SurfaceNormals, multi_body_icp
 
 
@@ -99,3 +99,25 @@ def test_threads_of_the_icp_queries_change_nothing():
     np.testing.assert_array_equal(fits[0].labels_, fits[1].labels_)
     np.testing.assert_array_equal(fits[0].flow_, fits[1].flow_)
     assert fits[0].n_clusters_ >= 2  # the static world and at least one car
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    rows=st.integers(0, 40).flatmap(
+        lambda n: arrays(
+            np.int64,
+            (n, 4),
+            elements=st.one_of(st.integers(-3, 3), st.integers(-(2**62), 2**62)),
+        )
+    ),
+    width=st.integers(1, 3),
+)
+def test_prefix_counts_count_distinct_rows_per_prefix(rows, width):
+    """Each distinct prefix, counted once per distinct full row it begins (as the
+    translation histogram counts a voter once per bin)."""
+    found, counts = prefix_counts(rows, width)
+    distinct = {tuple(row) for row in rows.tolist()}
+    expected = sorted({row[:width] for row in distinct})
+    assert found.dtype == rows.dtype
+    assert [tuple(row) for row in found.tolist()] == expected
+    assert counts.tolist() == [sum(row[:width] == p for row in distinct) for p in expected]

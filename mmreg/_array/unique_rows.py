@@ -9,7 +9,7 @@ Rows that do not fit take NumPy's way.
 
 import numpy as np
 
-__all__ = ["unique_rows"]
+__all__ = ["prefix_counts", "unique_rows"]
 
 _MAX_KEY = np.iinfo(np.int64).max
 
@@ -66,12 +66,18 @@ def unique_rows(rows, *, return_index=False, return_inverse=False, return_counts
         )
     keys, low, spans = packed
     distinct, extras = _unique_keys(keys, return_index, return_inverse, return_counts)
-    unique = np.empty((len(distinct), rows.shape[1]), dtype=rows.dtype)
-    rest = distinct.copy()
-    for column in range(rows.shape[1] - 1, -1, -1):
+    unique = _unpacked(distinct, low, spans, rows.dtype)
+    return (unique, *extras) if extras else unique
+
+
+def _unpacked(keys, low, spans, dtype):
+    """The rows whose packed keys (:func:`_packed`) are ``keys``."""
+    unique = np.empty((len(keys), len(spans)), dtype=dtype)
+    rest = keys.copy()
+    for column in range(len(spans) - 1, -1, -1):
         rest, digit = np.divmod(rest, spans[column])
         unique[:, column] = digit + low[column]
-    return (unique, *extras) if extras else unique
+    return unique
 
 
 def _unique_keys(keys, return_index, return_inverse, return_counts):
@@ -96,3 +102,33 @@ def _unique_keys(keys, return_index, return_inverse, return_counts):
     if return_counts:
         extras.append(np.diff(np.append(np.flatnonzero(first), n)))
     return ordered[first], extras
+
+
+def prefix_counts(rows, width):
+    """The distinct rows of ``rows[:, :width]`` and how many distinct full rows each
+    begins: ``unique_rows(unique_rows(rows)[:, :width], return_counts=True)``, with one
+    sort where the rows pack (the packed keys of the full rows, divided by the span of
+    the other columns, are those of their first ``width`` columns, already sorted).
+
+    Examples
+    --------
+    A voter (the last column) counts once per bin (the first two):
+
+    >>> import numpy as np
+    >>> from mmreg._array.unique_rows import prefix_counts
+    >>> prefix_counts(np.array([[1, 2, 7], [1, 2, 7], [1, 2, 8], [0, 5, 7]]), 2)
+    (array([[0, 5],
+           [1, 2]]), array([1, 2]))
+    """
+    rows = np.asarray(rows)
+    packed = _packed(rows)
+    if packed is None:
+        return unique_rows(unique_rows(rows)[:, :width], return_counts=True)
+    keys, low, spans = packed
+    distinct, _ = _unique_keys(keys, False, False, False)
+    # Sorted already: the prefixes' runs are their counts.
+    prefix = distinct // int(np.prod(spans[width:], dtype=np.int64))
+    first = np.ones(len(prefix), dtype=bool)
+    np.not_equal(prefix[1:], prefix[:-1], out=first[1:])
+    counts = np.diff(np.append(np.flatnonzero(first), len(prefix)))
+    return _unpacked(prefix[first], low[:width], spans[:width], rows.dtype), counts

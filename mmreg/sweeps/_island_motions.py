@@ -30,7 +30,7 @@ from sklearn.utils import check_random_state
 
 from mmreg._array.grouping import group_centroids
 from mmreg._array.motion import moving_clusters
-from mmreg._array.unique_rows import unique_rows
+from mmreg._array.unique_rows import prefix_counts
 from mmreg.sweeps._icp import subsample_groups
 
 __all__ = [
@@ -179,8 +179,7 @@ def translation_starts(
     offsets = sample[target] - moved[voters][source]
     bins = np.floor(offsets / bin_size).astype(np.int64)
     # Every voter votes once per bin: a dense patch of the sweep must not outvote.
-    key = unique_rows(np.column_stack([islands[voters][source], bins, source]))
-    votes, count = unique_rows(key[:, :4], return_counts=True)
+    votes, count = prefix_counts(np.column_stack([islands[voters][source], bins, source]), 4)
     order = np.lexsort((-count, votes[:, 0]))
     votes = votes[order]
     first = np.searchsorted(votes[:, 0], votes[:, 0], side="left")
