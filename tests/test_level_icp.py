@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from mmreg.sweeps._icp import SurfaceNormals
-from mmreg.sweeps._level_icp import _median, level_icp
+from mmreg.sweeps._level_icp import _median, level_icp, level_icps
 
 
 def _box(n, rng):
@@ -46,3 +46,45 @@ def test_a_box_s_turn_and_shift_are_found_in_any_units(yaw, shift, scale):
 def test_the_steps_median_is_numpys_to_the_bit(values):
     values = np.array(values)
     assert _median(values) == float(np.median(values))
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    shifts=st.lists(
+        st.tuples(st.floats(-0.4, 0.4), st.floats(-0.4, 0.4), st.floats(-0.1, 0.1)),
+        min_size=1,
+        max_size=4,
+    ),
+    tiny=st.integers(0, 4),
+    turn=st.booleans(),
+)
+def test_parts_refined_at_once_move_as_each_alone(shifts, tiny, turn):
+    """Boxes 10 m apart, each moved its own way, and one part of ``tiny`` points (too few
+    to match): refined at once, every part ends where it ends alone, in any order."""
+    rng = np.random.default_rng(1)
+    centres = [np.array([10.0 * k, 0.0, 0.0]) for k in range(len(shifts))]
+    boxes = [_box(600, rng) + centre for centre in centres]
+    # Each box turned about its own centre and shifted, sampled densely again.
+    sweep = np.vstack(
+        [
+            _box(8000, rng) @ _turn(yaw).T + centre + [x, y, 0.0]
+            for centre, (x, y, yaw) in zip(centres, shifts, strict=True)
+        ]
+    )
+    tree = cKDTree(sweep)
+    parts = [*boxes, rng.uniform(-50, -40, (tiny, 3))]
+    starts = [np.eye(4)] * len(parts)
+
+    def refined(parts, starts):
+        target = (sweep, tree, SurfaceNormals(sweep, tree, 10))
+        return level_icps(parts, starts, np.eye(4), target, max_distance=1.0, turn=turn)
+
+    together = refined(parts, starts)
+    backwards = refined(parts[::-1], starts[::-1])[::-1]
+    for k, part in enumerate(parts):
+        alone = refined([part], [starts[k]])[0]
+        for fit in (together[k], backwards[k]):
+            np.testing.assert_allclose(fit.motion, alone.motion, atol=1e-9)
+            np.testing.assert_allclose(fit.scale, alone.scale, rtol=1e-9, atol=1e-12)
+    assert np.isnan(together[-1].scale)  # too few points: left at its start
+    np.testing.assert_array_equal(together[-1].motion, np.eye(4))

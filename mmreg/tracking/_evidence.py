@@ -17,7 +17,7 @@ from mmreg._array.geometry import rows_in_box
 from mmreg._array.neighbors import lookup_tree
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_at
 from mmreg.sweeps._icp import multi_body_icp
-from mmreg.sweeps._level_icp import level_icp, level_part
+from mmreg.sweeps._level_icp import level_icps, level_part
 from mmreg.tracking._motion import transform
 
 # Points of a claim's candidates on which its starts are judged and refined.
@@ -122,6 +122,21 @@ class _Answers:
             moved = transform(motion, self.points)
             self._moved[key] = (moved, spacing_ratio(moved, tree, sweep, normals))
         return self._moved[key]
+
+    def ask(self, motions):
+        """:meth:`moved` under each of ``motions`` not yet asked, in one query of the
+        tree (the same answers: a query answers each point alone)."""
+        new = {motion.tobytes(): motion for motion in motions}
+        new = [motion for key, motion in new.items() if key not in self._moved]
+        if len(new) < 2:
+            return
+        sweep, tree, normals = self.target
+        moved = [transform(motion, self.points) for motion in new]
+        ratio, nearest, spacing = spacing_ratio(np.concatenate(moved), tree, sweep, normals)
+        n = len(self.points)
+        for k, motion in enumerate(new):
+            part = slice(k * n, (k + 1) * n)
+            self._moved[motion.tobytes()] = (moved[k], (ratio[part], nearest[part], spacing[part]))
 
     def explained(self, motion):
         """Whether ``motion`` puts each point within two spacings of the sweep."""
@@ -254,6 +269,7 @@ def track_claim(
     on_sample = _Answers(points[near_sample], target, scale, view, margin)
     on_tight_sample = _Answers(points[tight_sample], target, scale)
     seeds, motions, counts = [], [], []
+    on_sample.ask(starts)
     for start in starts:
         evidence = near_sample[on_sample.claimed(start, ego)]
         if share * len(evidence) < min_evidence:
@@ -269,17 +285,18 @@ def track_claim(
     seeds = [seeds[k] for k in best_starts]
     motions = [motions[k] for k in best_starts]
     if up is not None:  # road users: a turn about the vertical and a shift
-        refined_motions = [
-            level_icp(
-                points[rows],
-                level_part(start, ego, points[rows].mean(axis=0), up),
-                ego,
-                target,
-                max_distance=max_distance,
-                up=up,
-            ).motion
-            for rows, start in zip(seeds, motions, strict=True)
-        ]
+        fits = level_icps(
+            [points[rows] for rows in seeds],
+            [
+                level_part(start, ego, points[rows].mean(axis=0), up)
+                for rows, start in zip(seeds, motions, strict=True)
+            ],
+            ego,
+            target,
+            max_distance=max_distance,
+            up=up,
+        )
+        refined_motions = [fit.motion for fit in fits]
     else:
         rows = np.concatenate(seeds)
         group = np.repeat(np.arange(len(seeds)), [len(s) for s in seeds])
@@ -301,6 +318,7 @@ def track_claim(
             refined[:3, :3], refined[:3, 3] = result.rotations[k], result.translations[k]
             refined_motions.append(refined)
     on_near = _Answers(points[near], target, scale, view, margin)
+    on_near.ask([ego, *refined_motions])  # each is asked below
     on_tight = _Answers(points[tight], target, scale)
     sliding = np.zeros(len(near), dtype=bool)
     if up is not None and surface is not None:
