@@ -615,6 +615,17 @@ class LogTracker:
         holding = np.isin(around, rows)
         return around[np.isin(labels, np.unique(labels[holding]))]
 
+    def _grown(self, points, rows, free):
+        """``rows`` and their body (:meth:`_body_of`), where the two are no longer than a
+        car (``_BODY_SPAN``): a walker's body would be the wall beside it, which its level
+        motion slides along itself."""
+        if not len(rows):
+            return rows
+        grown = np.union1d(rows, self._body_of(points, rows, free, _PLACE_CELL * self.tau))
+        if np.ptp(points[grown], axis=0).max() > _BODY_SPAN * self.tau:
+            return rows
+        return grown
+
     def _gap(self, previous, frame, dt):
         """A pair with a sweep too sparse to register (an empty message, a dropped
         frame): the ego motion is predicted (constant velocity, else none), nothing is
@@ -819,6 +830,9 @@ class LogTracker:
         own, near, tight, predicted, needed = self._around_prediction(
             track, previous, frame, dt, prediction, clusters, free
         )
+        # Its whole body, as for a place left: a car coming into view grows past the
+        # part its track was born on.
+        tight = self._grown(first, tight, free)
         claim_from = functools.partial(
             self._claim, previous, frame, pair.ego, pair.scale, near, tight, min_evidence=needed
         )

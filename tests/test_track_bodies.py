@@ -1,0 +1,58 @@
+"""A track's claim grows to the body of the points near its prediction, no longer than a car.
+
+A car coming into view shows its first pair only a part (its front, far off); its track is
+born on that part, and the rest of the car, nearer as it passes, lies beyond the reach of
+the track's points. The claim takes the islands that hold those points, as a place left
+takes its car. A walker beside a wall shares the wall's island: a body longer than a car
+is no road user's, and the claim keeps to the points near its prediction.
+"""
+
+import numpy as np
+import pytest
+
+from mmreg.tracking._log import LogTracker
+
+
+def _tracker(tau):
+    return LogTracker(
+        None,
+        tau=tau,
+        lookahead=0,
+        max_misses=3,
+        frame_rate=None,
+        min_points=10,
+        rng=np.random.RandomState(0),
+    )
+
+
+def _box(low, high, spacing, rng):
+    """Points filling a box at about ``spacing`` (a solid: every voxel of it occupied)."""
+    low, high = np.asarray(low, float), np.asarray(high, float)
+    n = int(np.prod(np.ceil((high - low) / spacing)))
+    return rng.uniform(low, high, (4 * n, 3))
+
+
+@pytest.mark.parametrize("scale", [1.0, 100.0])  # metres, centimetres
+def test_a_car_s_front_grows_to_the_car_and_a_walker_not_to_the_wall(scale):
+    rng = np.random.default_rng(0)
+    car = _box([0.0, 0.0, 0.0], [4.4, 1.8, 1.5], 0.2, rng)
+    other = _box([0.0, 4.0, 0.0], [4.4, 5.8, 1.5], 0.2, rng)  # 2.2 m beside it
+    walker = _box([20.0, 0.0, 0.0], [20.5, 0.5, 1.7], 0.1, rng)
+    wall = _box([14.0, 0.55, 0.0], [26.0, 0.75, 2.0], 0.2, rng)  # touching the walker
+    points = np.vstack([car, other, walker, wall]) * scale
+    label = np.repeat(np.arange(4), [len(car), len(other), len(walker), len(wall)])
+    free = np.ones(len(points), dtype=bool)
+    tracker = _tracker(5.0 * scale)
+
+    front = np.flatnonzero((label == 0) & (points[:, 0] > 3.0 * scale))
+    grown = tracker._grown(points, front, free)
+    np.testing.assert_array_equal(grown, np.flatnonzero(label == 0))  # the car, no more
+
+    held = np.flatnonzero(label == 2)
+    np.testing.assert_array_equal(tracker._grown(points, held, free), held)
+
+    # Points another track holds (not free) are not taken.
+    free[label == 0] = points[label == 0, 0] > 2.0 * scale
+    np.testing.assert_array_equal(
+        tracker._grown(points, front, free), np.flatnonzero(free & (label == 0))
+    )
