@@ -116,19 +116,15 @@ class _Answers:
 
     def moved(self, motion):
         """The points moved by ``motion`` and their :func:`spacing_ratio`."""
-        key = motion.tobytes()
-        if key not in self._moved:
-            sweep, tree, normals = self.target
-            moved = transform(motion, self.points)
-            self._moved[key] = (moved, spacing_ratio(moved, tree, sweep, normals))
-        return self._moved[key]
+        self.ask([motion])
+        return self._moved[motion.tobytes()]
 
     def ask(self, motions):
         """:meth:`moved` under each of ``motions`` not yet asked, in one query of the
         tree (the same answers: a query answers each point alone)."""
         new = {motion.tobytes(): motion for motion in motions}
         new = [motion for key, motion in new.items() if key not in self._moved]
-        if len(new) < 2:
+        if not new:
             return
         sweep, tree, normals = self.target
         moved = [transform(motion, self.points) for motion in new]
@@ -269,7 +265,7 @@ def track_claim(
     on_sample = _Answers(points[near_sample], target, scale, view, margin)
     on_tight_sample = _Answers(points[tight_sample], target, scale)
     seeds, motions, counts = [], [], []
-    on_sample.ask(starts)
+    on_sample.ask([ego, *starts])  # the ego motion's and each start's, asked below
     for start in starts:
         evidence = near_sample[on_sample.claimed(start, ego)]
         if share * len(evidence) < min_evidence:
