@@ -202,6 +202,9 @@ class LogTracker:
     min_points : int
         The pair estimator's smallest island: the most evidence a track needs.
     rng : numpy.random.RandomState
+        Seeds two streams of its own: one seeds the pairs' estimators, the other draws
+        the points a track keeps. Apart, a change to what a track keeps leaves every
+        pair's draws as they were.
     voxel_size : float or None
         Register one point per voxel of this side (every point takes its voxel's labels);
         None: every point.
@@ -226,7 +229,10 @@ class LogTracker:
         self.max_misses = max_misses
         self.frame_rate = frame_rate
         self.min_points = min_points
-        self._state = _LogState(rng=rng)
+        pairs, samples = rng.randint(2**31 - 1, size=2)
+        self._state = _LogState(
+            rng=np.random.RandomState(samples), pair_rng=np.random.RandomState(pairs)
+        )
 
     def _time(self, index, time):
         if time is not None:
@@ -734,7 +740,7 @@ class LogTracker:
         state = self._state
         start = self._ego_start(previous, frame)
         first, second = previous.returns, frame.returns
-        estimator = self._make_pair(self._state.rng.randint(2**31 - 1))
+        estimator = self._make_pair(self._state.pair_rng.randint(2**31 - 1))
         kwargs = {} if start is None else {"ego_motion": (start[:3, :3], start[:3, 3])}
         parameters = _fit_parameters(estimator)
         if frame.seconds and "interval" in parameters:
@@ -1184,7 +1190,8 @@ class LogTracker:
 
 @dataclass
 class _LogState:
-    rng: np.random.RandomState
+    rng: np.random.RandomState  # the points a track keeps
+    pair_rng: np.random.RandomState  # the pairs' seeds
     tracks: list = field(default_factory=list)
     identity: dict = field(default_factory=dict)
     alias: dict = field(default_factory=dict)  # a joined track's key -> the track it joined
