@@ -12,6 +12,7 @@ from sklearn.base import BaseEstimator, clone
 from mmreg import SequenceRegistration, SweepRegistration
 from mmreg.datasets import make_lidar_sequence
 from mmreg.datasets._lidar_sequence import _hidden_mover_log
+from mmreg.tracking import _log
 
 
 def _in_box(points, box):
@@ -461,3 +462,29 @@ def test_a_track_s_few_points_where_it_ends_are_static():
     # The log's last frame has no pair after it: nothing is a remnant there.
     kept, gone = tracker._without_remnants(keys, frame, ending=False)
     assert gone == set() and kept is keys
+
+
+def test_what_a_track_keeps_does_not_reseed_the_pairs(monkeypatch):
+    # The pairs' seeds come from a stream of their own: tracks that keep fewer points
+    # (other draws of the track samples) leave every pair's seed as it was.
+    log = make_lidar_sequence(5, frame_rate=10.0, n_azimuths=512, random_state=3)
+
+    def seeds_of_a_fit():
+        seeds = []
+        make = SequenceRegistration._pair_estimator
+
+        def recording(self, seed):
+            seeds.append(seed)
+            return make(self, seed)
+
+        with monkeypatch.context() as patch:
+            patch.setattr(SequenceRegistration, "_pair_estimator", recording)
+            est = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+        return seeds, est
+
+    seeds, est = seeds_of_a_fit()
+    assert est.n_tracks_ >= 1  # tracks there are, and they draw samples
+    monkeypatch.setattr(_log, "_TRACK_POINTS", 20)
+    fewer, _ = seeds_of_a_fit()
+    assert len(seeds) == len(log.frames) - 1
+    assert fewer == seeds
