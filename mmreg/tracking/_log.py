@@ -411,7 +411,7 @@ class LogTracker:
             self._state.recent = kept_frames(self._state.recent, previous)
         for track in self._confirm_and_end(previous, seen):
             self._extend_back(track, previous)
-        self._carry(previous, frame)
+        self._carry(previous, frame, pair.sweep_ground)
 
     def _inherit(self, track, cover, order, seen, heirs):
         """Make the new ``track`` the heir of the confirmed track, not seen in this pair
@@ -711,11 +711,14 @@ class LogTracker:
         """The public id of track ``key`` (0: none), through the tracks it joined."""
         return self._state.identity.get(self._joined(key)[-1], 0)
 
-    def _carry(self, previous, frame):
+    def _carry(self, previous, frame, ground):
         """Where each track seen in ``previous`` lands in ``frame``: the points of the
         second sweep within two of its spacings (and a twentieth of tau) of the track's
         points moved by its motion. They are the track's in ``frame`` where the next pair
-        does not say otherwise (it may miss the object, or there may be no next pair)."""
+        does not say otherwise (it may miss the object, or there may be no next pair).
+        Where they are the road alone (``ground``, the pair's), the object has gone: a car
+        that left the view would leave its label on the road it drove on. A car's
+        lowest points, which the ground's segmentation may take, stay its."""
         points, tree, normals = frame.target()
         frame.carried = np.full(len(points), -1, dtype=np.intp)
         free = ~frame.body
@@ -726,7 +729,7 @@ class LogTracker:
                 continue
             distance, _ = lookup_tree(moved).query(points[near])
             near = near[distance <= EXPLAINED_SPACINGS * normals.spacing(near)]
-            if len(near) < _MIN_EVIDENCE:  # a few points are no object's
+            if np.count_nonzero(~ground[near]) < _MIN_EVIDENCE:  # a few points are no object's
                 continue
             frame.carried[near] = key
             free[near] = False
