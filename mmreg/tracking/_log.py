@@ -589,10 +589,10 @@ class LogTracker:
         _, near, tight, starts, needed = self._around_prediction(
             track, previous, old, old.time - previous.time, prediction, clusters, free
         )
-        if len(tight):
-            # Its whole body, as for a place left: a track born on a car's rear (its only
-            # place left in a pair) grows to the car that the span shows moving.
-            tight = np.union1d(tight, self._body_of(first, tight, free, _PLACE_CELL * self.tau))
+        # Its whole body, as for a place left: a track born on a car's rear (its only
+        # place left in a pair) grows to the car that the span shows moving (no longer
+        # than a car: a walker's body would be the wall beside it).
+        tight = self._grown(first, tight, free)
         claim = self._claim(previous, old, span.back, span.scale, near, tight, starts, needed)
         if claim is None:
             return None
