@@ -89,6 +89,8 @@ class SequenceRegistration(BaseEstimator):
         (32 beams, 2 Hz) it loses many (scene-0004's IoU 0.76 -> 0.59). A dense sensor's
         trade, not a default.
     random_state : int, RandomState instance or None, default=None
+        Seeds two streams: one seeds the pairs' estimators, the other draws the points
+        a track keeps (so that what a track keeps does not change the pairs' draws).
 
     Attributes
     ----------
