@@ -9,20 +9,7 @@ is no road user's, and the claim keeps to the points near its prediction.
 
 import numpy as np
 import pytest
-
-from mmreg.tracking._log import LogTracker
-
-
-def _tracker(tau):
-    return LogTracker(
-        None,
-        tau=tau,
-        lookahead=0,
-        max_misses=3,
-        frame_rate=None,
-        min_points=10,
-        rng=np.random.RandomState(0),
-    )
+from _trackers import bare_tracker
 
 
 def _box(low, high, spacing, rng):
@@ -42,7 +29,7 @@ def test_a_car_s_front_grows_to_the_car_and_a_walker_not_to_the_wall(scale):
     points = np.vstack([car, other, walker, wall]) * scale
     label = np.repeat(np.arange(4), [len(car), len(other), len(walker), len(wall)])
     free = np.ones(len(points), dtype=bool)
-    tracker = _tracker(5.0 * scale)
+    tracker = bare_tracker(5.0 * scale)
 
     front = np.flatnonzero((label == 0) & (points[:, 0] > 3.0 * scale))
     grown = tracker._grown(points, front, free)

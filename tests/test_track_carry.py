@@ -9,20 +9,9 @@ lowest points, even those the ground's segmentation took.
 
 import numpy as np
 import pytest
+from _trackers import bare_tracker
 
-from mmreg.tracking._log import LogFrame, LogTracker
-
-
-def _tracker(tau):
-    return LogTracker(
-        None,
-        tau=tau,
-        lookahead=0,
-        max_misses=3,
-        frame_rate=None,
-        min_points=10,
-        rng=np.random.RandomState(0),
-    )
+from mmreg.tracking._log import LogFrame
 
 
 def _frame(index, points):
@@ -53,7 +42,7 @@ def test_a_car_carried_keeps_its_lowest_points_and_a_car_gone_leaves_the_road(sc
     previous = _frame(0, np.vstack([road, car]) * scale)
     previous.track_of = np.r_[np.full(len(road), -1), np.full(len(car), 7)]
     previous.motions = {7: step}
-    tracker = _tracker(5.0 * scale)
+    tracker = bare_tracker(5.0 * scale)
 
     # The car is there, 1 m on (hiding the road beneath it); the ground's segmentation
     # took its lowest ring too.
