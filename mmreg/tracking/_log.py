@@ -362,6 +362,8 @@ class LogTracker:
             found = self._track_detection(
                 track, previous, frame, pair, [detections[j] for j in mine], predictions[i], free
             )
+            if found is not None:  # the pair shows it moving
+                track.stopped = False
             if found is None and (track.slow or not track.confirmed) and span is not None:
                 # Too slow for its pairs (a walker): its motion over the long span.
                 found = self._long_detection(
@@ -566,17 +568,18 @@ class LogTracker:
         scale = (previous.index - old.index) * max(previous.scale, old.scale)
         return _Span(old, back, scale)
 
-    def _pair_motion(self, previous, frame, span, back, rows):
+    def _pair_motion(self, previous, frame, span, back, rows, ties=False):
         """The pair's motion of ``previous``'s ``rows`` at the twist of ``back``, their
         motion to the frame of ``span``; None where the pair refutes it (the object has
-        stopped since, :func:`~mmreg.tracking._long_span.refuted`)."""
+        stopped since, :func:`~mmreg.tracking._long_span.refuted`; with ``ties``, also
+        where it says as much for the motion as against it)."""
         old = span.frame
         centre = transform(previous.pose, previous.returns[rows]).mean(axis=0)
         poses = (previous.pose, frame.pose, old.pose)
         motion = pair_motion(
             back, poses, centre, previous.time - old.time, frame.time - previous.time
         )
-        if refuted(previous.returns[rows], previous.ego, motion, frame.target()):
+        if refuted(previous.returns[rows], previous.ego, motion, frame.target(), ties=ties):
             return None
         return motion
 
@@ -599,7 +602,11 @@ class LogTracker:
         rows = _off_the_ground(previous, claim.rows, claim.shown, _TIGHT * self.tau)
         if not len(rows):
             return None
-        motion = self._pair_motion(previous, frame, span, claim.motion, rows)
+        # Half a second averages a braking car's motion: once the pair has shown it
+        # stopped, a stand-off (a motion too slow for the pair to tell from rest) does
+        # not set it moving again.
+        motion = self._pair_motion(previous, frame, span, claim.motion, rows, track.stopped)
+        track.stopped = motion is None
         if motion is None:
             return None
         dt = frame.time - previous.time

@@ -84,12 +84,14 @@ def pair_motion(back, poses, centre, span, dt):
     return compose(inverse(second), predicted_motion(omega, velocity, centre, dt), first)
 
 
-def refuted(points, ego, motion, target):
+def refuted(points, ego, motion, target, *, ties=False):
     """Whether the next sweep refutes ``motion`` of ``points`` against the ego motion.
 
     It does when more of the points lie on it (within two of its spacings, as a claim
     counts them) where ``ego`` puts them and not where ``motion`` does than the other
-    way round. ``target``: ``(sweep, tree, normals)`` of the next sweep.
+    way round; with ``ties``, also when as many do (no more points say it moves than say
+    it stands: an object the sweeps showed stopping needs the next sweep's word to move
+    again). ``target``: ``(sweep, tree, normals)`` of the next sweep.
 
     Examples
     --------
@@ -106,7 +108,17 @@ def refuted(points, ego, motion, target):
     >>> gone = (moved, cKDTree(moved), SurfaceNormals(moved, cKDTree(moved), 10))
     >>> refuted(box, np.eye(4), shift, standing), refuted(box, np.eye(4), shift, gone)
     (True, False)
+
+    A shift of a hundredth of the spacing: the sweep tells the two apart nowhere.
+
+    >>> creep = np.eye(4)
+    >>> creep[0, 3] = 0.0005
+    >>> still = refuted(box, np.eye(4), creep, standing)
+    >>> still, refuted(box, np.eye(4), creep, standing, ties=True)
+    (False, True)
     """
     answers = _Answers(points, target, scale=None)
     on_ego, on_motion = answers.explained(ego), answers.explained(motion)
-    return bool(np.count_nonzero(on_ego & ~on_motion) > np.count_nonzero(on_motion & ~on_ego))
+    against = np.count_nonzero(on_ego & ~on_motion)
+    for_ = np.count_nonzero(on_motion & ~on_ego)
+    return bool(against > for_ or (ties and against == for_))

@@ -42,6 +42,9 @@ class Track:
     # Found over the long span (frames half a second apart), where its pairs show nothing:
     # it is followed there too.
     slow: bool = False
+    # Over the long span, the pair last refuted its motion (it had stopped since): a claim
+    # there needs the pair's evidence that it moves again, not only none against it.
+    stopped: bool = False
 
     def __post_init__(self):
         if self.first_frame < 0:
