@@ -159,6 +159,13 @@ class _Answers:
             occluder[ask] = self.view.nearest_return(self.moved(motion)[0][ask])
         return occluder[rows]
 
+    def hidden(self, motion):
+        """Whether the second sweep could not have seen each point where ``motion`` puts
+        it: a return in its direction lies more than the margin nearer (needs a view)."""
+        rows = np.arange(len(self.points))
+        occluder = self._nearest_return(motion, rows)
+        return occluder < np.linalg.norm(self.moved(motion)[0], axis=1) - self.margin
+
     def claimed(self, motion, ego):
         """:func:`claimed_points` of these points."""
         claimed = self.unexplained(ego) & self.explained(motion)
@@ -315,7 +322,7 @@ def track_claim(
             refined_motions.append(refined)
     on_near = _Answers(points[near], target, scale, view, margin)
     on_near.ask([ego, *refined_motions])  # each is asked below
-    on_tight = _Answers(points[tight], target, scale)
+    on_tight = _Answers(points[tight], target, scale, view, margin)
     sliding = np.zeros(len(near), dtype=bool)
     if up is not None and surface is not None:
         sliding = on_level(surface, near, up)
@@ -343,4 +350,10 @@ def track_claim(
         # with like evidence; the true one explains the whole body, ends included.
         if best is None or (len(rows), score) > (len(best.rows), best.evidence):
             best = Claim(rows, score, refined, evidence)
+    if best is not None and view is not None:
+        # The body's points that the next sweep could not see where the motion puts them
+        # (behind another object) are no evidence either way: they stay the body's.
+        hidden = tight[on_tight.hidden(best.motion) & ~on_tight.explained(best.motion)]
+        if len(hidden):
+            best = Claim(np.union1d(best.rows, hidden), best.evidence, best.motion, best.shown)
     return best
