@@ -9,7 +9,7 @@ slow movers use, :mod:`mmreg.sweeps._explained`). A parked car gives none: the e
 explains it.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -158,13 +158,6 @@ class _Answers:
         if len(ask):
             occluder[ask] = self.view.nearest_return(self.moved(motion)[0][ask])
         return occluder[rows]
-
-    def hidden(self, motion):
-        """Whether the second sweep could not have seen each point where ``motion`` puts
-        it: a return in its direction lies more than the margin nearer (needs a view)."""
-        rows = np.arange(len(self.points))
-        occluder = self._nearest_return(motion, rows)
-        return occluder < np.linalg.norm(self.moved(motion)[0], axis=1) - self.margin
 
     def claimed(self, motion, ego):
         """:func:`claimed_points` of these points."""
@@ -322,7 +315,7 @@ def track_claim(
             refined_motions.append(refined)
     on_near = _Answers(points[near], target, scale, view, margin)
     on_near.ask([ego, *refined_motions])  # each is asked below
-    on_tight = _Answers(points[tight], target, scale, view, margin)
+    on_tight = _Answers(points[tight], target, scale)
     sliding = np.zeros(len(near), dtype=bool)
     if up is not None and surface is not None:
         sliding = on_level(surface, near, up)
@@ -353,7 +346,6 @@ def track_claim(
     if best is not None and view is not None:
         # The body's points that the next sweep could not see where the motion puts them
         # (behind another object) are no evidence either way: they stay the body's.
-        hidden = tight[on_tight.hidden(best.motion) & ~on_tight.explained(best.motion)]
-        if len(hidden):
-            best = Claim(np.union1d(best.rows, hidden), best.evidence, best.motion, best.shown)
+        hidden = view.hidden(on_tight.moved(best.motion)[0], margin)
+        best = replace(best, rows=np.union1d(best.rows, tight[hidden]))
     return best
