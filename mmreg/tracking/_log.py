@@ -164,6 +164,14 @@ class LogFrame:
         return self._target
 
 
+def _length(points):
+    """The largest extent of ``points`` along their own principal axes: a body's length
+    whichever way it faces (along the sensor's axes, a car seen diagonally is shorter)."""
+    centred = points - points.mean(axis=0)
+    _, axes = np.linalg.eigh(centred.T @ centred)
+    return float(np.ptp(centred @ axes, axis=0).max())
+
+
 def _box(points):
     """Length, width, height and yaw of the points' box (principal axes in x-y)."""
     xy = points[:, :2] - points[:, :2].mean(axis=0)
@@ -635,7 +643,7 @@ class LogTracker:
         if not len(rows):
             return rows
         grown = np.union1d(rows, self._body_of(points, rows, free, _PLACE_CELL * self.tau))
-        if np.ptp(points[grown], axis=0).max() > _BODY_SPAN * self.tau:
+        if _length(points[grown]) > _BODY_SPAN * self.tau:
             return rows
         return grown
 
