@@ -886,7 +886,9 @@ class LogTracker:
             )
             rows = _off_the_ground(previous, rows, claim.shown, _TIGHT * self.tau)
         elif clusters and track.confirmed:
+            # The pair's own motion for its largest cluster, level as a new track's is.
             rows, motion = own, max(clusters, key=lambda c: len(c[0]))[1]
+            motion = self._level(previous, frame, rows, motion)
         else:
             return None
         # A track takes a detection only where its motion follows the track's.
@@ -944,24 +946,11 @@ class LogTracker:
         previous.motions[track.key] = motion
 
     def _born(self, previous, frame, rows, motion, dt, refit=True):
-        """A tentative track for a moving cluster no track holds.
-
-        In z-up sweeps its motion is fitted again, level (a turn about the vertical and
-        a shift, :mod:`mmreg.sweeps._level_icp`), from the cluster's: a far car's few
-        points fit a free motion that tilts it by tens of degrees.
-        """
+        """A tentative track for a moving cluster no track holds; unless ``refit`` is
+        False, the cluster's motion fitted again, level (:meth:`_level`)."""
         state = self._state
-        first = previous.returns
-        if previous.up is not None and refit:
-            level = level_part(motion, previous.ego, first[rows].mean(axis=0), previous.up)
-            motion = level_icp(
-                first[rows],
-                level,
-                previous.ego,
-                frame.target(),
-                max_distance=0.2 * self.tau,
-                up=previous.up,
-            ).motion
+        if refit:
+            motion = self._level(previous, frame, rows, motion)
         world = compose(frame.pose, motion, inverse(previous.pose))
         points = transform(previous.pose, previous.returns[rows])
         omega, velocity = twist_of(world, points.mean(axis=0), dt)
@@ -978,6 +967,24 @@ class LogTracker:
         previous.track_of[rows] = track.key
         previous.motions[track.key] = motion
         return track
+
+    def _level(self, previous, frame, rows, motion):
+        """A pair's motion of ``previous``'s points ``rows`` fitted again, level (a turn
+        about the vertical and a shift, :mod:`mmreg.sweeps._level_icp`), in z-up sweeps:
+        a far car's few points fit a free motion that tilts it by tens of degrees, and
+        a track that took it would predict the car sinking into the road."""
+        if previous.up is None:
+            return motion
+        first = previous.returns
+        level = level_part(motion, previous.ego, first[rows].mean(axis=0), previous.up)
+        return level_icp(
+            first[rows],
+            level,
+            previous.ego,
+            frame.target(),
+            max_distance=0.2 * self.tau,
+            up=previous.up,
+        ).motion
 
     def _confirm_and_end(self, previous, seen):
         """Confirm the tentative tracks seen twice; coast the others, ending those that
