@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 import mmreg.sweeps._pair as pair_module
-import mmreg.tracking._log as log_module
+import mmreg.tracking._pairs as pairs_module
 from mmreg import SequenceRegistration
 from mmreg.datasets import make_lidar_sequence
 from mmreg.sweeps._ego_body import would_show_body
@@ -45,7 +45,7 @@ def _searches(monkeypatch, frames, bodiless_pairs):
         return found
 
     monkeypatch.setattr(pair_module, "find_ego_body", counted)
-    monkeypatch.setattr(log_module, "_BODILESS_PAIRS", bodiless_pairs)
+    monkeypatch.setattr(pairs_module, "BODILESS_PAIRS", bodiless_pairs)
     est = SequenceRegistration(random_state=0).fit(frames, times=np.arange(len(frames)) * 0.1)
     return est, calls
 

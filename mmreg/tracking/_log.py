@@ -22,7 +22,6 @@ frames are kept.
 """
 
 import functools
-import inspect
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -36,7 +35,6 @@ from mmreg._array.neighbors import lookup_tree
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
-from mmreg.sweeps._ego_body import carried_body, would_show_body
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -51,10 +49,10 @@ from mmreg.tracking._motion import (
     compose,
     inverse,
     predicted_motion,
-    to_matrix,
     transform,
     twist_of,
 )
+from mmreg.tracking._pairs import FEWEST_POINTS, PairChain
 from mmreg.tracking._tracks import Track, consistent_motion, overlap_matrix
 from mmreg.tracking._visibility import RangeView
 
@@ -77,16 +75,11 @@ _MIN_OVERLAP = 0.3
 _MOTION_TOLERANCE = 0.04
 # The prediction's twist is tried at these shares of its speed.
 _SPEEDS = (1.0, 0.75, 1.25, 0.5, 0.25)
-# A log whose sensor sees no body of its own: this many pairs in a row that would have
-# shown one (they moved enough, would_show_body) showed none; later pairs look no more.
-_BODILESS_PAIRS = 2
 # Two tracks' pieces this close (share of tau) that move this alike (share of their
 # displacement, and of tau) are one object.
 _PIECES = 0.2
 _ALIKE = 0.1
 _ALIKE_NOISE = 0.01
-# A sweep with fewer valid points is not registered (SweepRegistration needs 10).
-_FEWEST_POINTS = 10
 # The least evidence a track's motion needs, in points (a quarter of a small object's).
 _MIN_EVIDENCE = 4
 # A place is hidden from a sweep behind a return this much nearer (share of tau).
@@ -145,6 +138,21 @@ class LogFrame:
         if self._returns is None:
             self._returns = self.points[self.valid]
         return self._returns
+
+    def for_pairs(self):
+        """A copy with what a pair reads of a frame (to send to another process)."""
+        return LogFrame(
+            self.index,
+            self.points,
+            self.valid,
+            self.time,
+            given_pose=self.given_pose,
+            state=self.state,
+            seconds=self.seconds,
+            point_times=self.point_times,
+            up=self.up,
+            covered=self.covered,
+        )
 
     def view(self):
         """The range image of the valid rows, built once."""
@@ -238,9 +246,8 @@ class LogTracker:
         self.frame_rate = frame_rate
         self.min_points = min_points
         pairs, samples = rng.randint(2**31 - 1, size=2)
-        self._state = _LogState(
-            rng=np.random.RandomState(samples), pair_rng=np.random.RandomState(pairs)
-        )
+        self._state = _LogState(rng=np.random.RandomState(samples))
+        self.pairs = PairChain(make_pair, tau=tau, rng=np.random.RandomState(pairs))
 
     def _time(self, index, time):
         if time is not None:
@@ -249,13 +256,16 @@ class LogTracker:
 
     def step(self, points, time, pose, point_times=None):
         """Add one frame; the results (Bunches) of the frames it makes final."""
-        state = self._state
+        return self.add(self.new_frame(self._state.n_frames, points, time, pose, point_times))
+
+    def new_frame(self, index, points, time, pose, point_times=None):
+        """Frame ``index`` of the log as the steps hold it (its valid rows, the rows it is
+        registered on, its time, whether it is z-up); it changes nothing of the log."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] < 3:
             raise ValueError(f"a frame must have shape (n, 3); got {points.shape}.")
         points = points[:, :3]
         valid = ~invalid_points(points)
-        index = state.n_frames
         used, covered = self._voxels(points, valid)
         frame = LogFrame(index, points, used, self._time(index, time), given_pose=pose)
         frame.covered = covered
@@ -270,12 +280,22 @@ class LogTracker:
         frame.seconds = time is not None or self.frame_rate is not None
         if valid.sum() >= 3 and is_z_up_sweep(points[valid]):
             frame.up = np.array([0.0, 0.0, 1.0])
+        return frame
+
+    def add(self, frame, pair=None):
+        """Add the next frame (:meth:`new_frame`); ``pair``: the :class:`PairFit` of the
+        last frame and this one where it was fitted elsewhere (a process of its own),
+        else None. The results (Bunches) of the frames it makes final."""
+        state = self._state
+        index = frame.index
         if state.previous is None:
-            frame.pose = np.eye(4) if pose is None else np.asarray(pose, dtype=float)
+            frame.pose = (
+                np.eye(4) if frame.given_pose is None else np.asarray(frame.given_pose, dtype=float)
+            )
         else:
             if frame.time <= state.previous.time:
                 raise ValueError(f"frame {index}: its time does not follow the last frame's.")
-            self._register_pair(state.previous, frame)
+            self._register_pair(state.previous, frame, pair)
             state.pending.append(state.previous)
         state.previous = frame
         state.n_frames += 1
@@ -319,21 +339,9 @@ class LogTracker:
         state.pending = []
         return [self._result(f, after) for f, after in zip(chain, [*chain[1:], None], strict=True)]
 
-    def _ego_start(self, previous, frame):
-        """The ego motion's start: the poses given, else the last ego motion (constant
-        velocity), scaled to this interval; None for the first pair."""
-        if previous.given_pose is not None and frame.given_pose is not None:
-            return compose(inverse(frame.given_pose), previous.given_pose)
-        last = self._state.last_ego
-        if last is None:
-            return None
-        motion, dt = last
-        ratio = (frame.time - previous.time) / dt
-        omega, velocity = twist_of(motion, np.zeros(3), 1.0)
-        return predicted_motion(omega, velocity, np.zeros(3), ratio)
-
-    def _register_pair(self, previous, frame):
-        """One step: register the pair, then predict, associate and update the tracks.
+    def _register_pair(self, previous, frame, fit=None):
+        """One step: register the pair (or take its ``fit``), then predict, associate
+        and update the tracks.
 
         ``previous`` is the first sweep; its labels are what this pair and the tracks
         say of it. ``frame`` (the second sweep) gets its pose.
@@ -341,10 +349,16 @@ class LogTracker:
         state = self._state
         state.last_first = previous
         dt = frame.time - previous.time
-        if min(len(previous.returns), len(frame.returns)) < _FEWEST_POINTS:
-            self._gap(previous, frame, dt)
+        if fit is None:
+            fit = self.pairs.fit(previous, frame)
+        else:
+            _take_states(fit.states, previous, frame)
+            for message, category in fit.warnings:
+                warn(message, category)
+        if fit.gap:
+            self._gap(previous, frame, fit)
             return
-        pair = self._fit_pair(previous, frame, dt)
+        pair = self._take_pair(previous, frame, fit)
         first = previous.returns
         span = self._span(previous)
         predictions = self._predict(previous.time, previous.pose)
@@ -647,27 +661,26 @@ class LogTracker:
             return rows
         return grown
 
-    def _gap(self, previous, frame, dt):
+    def _gap(self, previous, frame, fit):
         """A pair with a sweep too sparse to register (an empty message, a dropped
-        frame): the ego motion is predicted (constant velocity, else none), nothing is
-        labelled but by the tracks carried, and the tracks coast."""
+        frame): the ego motion is predicted (``fit.ego``: constant velocity, else none),
+        nothing is labelled but by the tracks carried, and the tracks coast."""
         warn(
-            f"frame {frame.index if len(previous.returns) >= _FEWEST_POINTS else previous.index}"
-            f": fewer than {_FEWEST_POINTS} valid points; the pair of frames "
+            f"frame {frame.index if len(previous.returns) >= FEWEST_POINTS else previous.index}"
+            f": fewer than {FEWEST_POINTS} valid points; the pair of frames "
             f"{previous.index} and {frame.index} is not registered."
         )
-        start = self._ego_start(previous, frame)
-        ego = np.eye(4) if start is None else start
+        ego = fit.ego
         previous.ego = ego
         frame.pose = compose(previous.pose, inverse(ego))
         n = len(previous.returns)
         previous.pair_labels = np.zeros(n, dtype=np.intp)
         previous.pair_flow = transform(ego, previous.returns) - previous.returns
-        previous.body = np.zeros(n, dtype=bool) if previous.body is None else previous.body
+        previous.body = fit.body
         previous.ground = np.zeros(n, dtype=bool)
         previous.scale = 0.002 * self.tau
         previous.track_of = np.full(n, -1, dtype=np.intp)
-        frame.body = np.zeros(len(frame.returns), dtype=bool)
+        frame.body = fit.sweep_body
         self._confirm_and_end(previous, {})
         frame.carried = np.full(len(frame.returns), -1, dtype=np.intp)
 
@@ -752,74 +765,24 @@ class LogTracker:
             if track is not None:
                 frame.carried_twists[key] = (track.omega.copy(), track.velocity.copy())
 
-    def _fit_pair(self, previous, frame, dt):
-        """Register the two sweeps; the first sweep's labels, flow, body and ground, and
-        the moving clusters as detections ``{j: (rows, 4 x 4 motion)}``."""
-        state = self._state
-        start = self._ego_start(previous, frame)
-        first, second = previous.returns, frame.returns
-        estimator = self._make_pair(self._state.pair_rng.randint(2**31 - 1))
-        kwargs = {} if start is None else {"ego_motion": (start[:3, :3], start[:3, 3])}
-        parameters = _fit_parameters(estimator)
-        if frame.seconds and "interval" in parameters:
-            kwargs["interval"] = dt  # bounds the objects' motions by what road users do
-        # With capture times (any offset at all) the pair deskews the moving objects.
-        timed = (
-            frame.seconds
-            and "times" in parameters
-            and previous.point_times is not None
-            and frame.point_times is not None
-            and (np.any(previous.point_times != 0) or np.any(frame.point_times != 0))
-        )
-        if timed:
-            kwargs.update(times=previous.point_times, sweep_times=frame.point_times)
-        if "states" in parameters and hasattr(estimator, "sweep_state"):
-            # Each sweep's ground, trees, normals and islands are computed once, for
-            # both pairs it is in.
-            for sweep in (previous, frame):
-                if sweep.state is None:
-                    sweep.state = estimator.sweep_state(sweep.returns)
-            kwargs["states"] = (previous.state, frame.state)
-        if "ego_body" in parameters and previous.body is not None and previous.body.any():
-            # The ego vehicle's body is fixed in the sensor's frame: found once, it is
-            # the next sweep's points where the last sweep's body points were.
-            body = previous.returns[previous.body]
-            kwargs["ego_body"] = (previous.body, carried_body(body, second, self.tau))
-        elif "ego_body" in parameters and state.bodiless >= _BODILESS_PAIRS:
-            # ... and where pairs that would have shown it showed none, there is none.
-            kwargs["ego_body"] = (np.zeros(len(first), bool), np.zeros(len(second), bool))
-        pair = estimator.fit(first, sweep=second, **kwargs)
-        ego = to_matrix(*pair.ego_motion_)
-        state.last_ego = (ego, dt)
-        previous.ego = ego
-        frame.pose = compose(previous.pose, inverse(ego))
-        labels = np.asarray(pair.labels_)
-        previous.pair_labels = labels
-        previous.pair_flow = np.asarray(pair.flow_)
-        previous.body = _mask(getattr(pair, "ego_body_mask_", None), len(first))
-        frame.body = _mask(getattr(pair, "sweep_ego_body_mask_", None), len(second))
-        if previous.body.any():
-            state.bodiless = 0
-        elif would_show_body(pair.ego_motion_, self.tau):
-            state.bodiless += 1
-        static = int(pair.static_cluster_)
-        detections = {
-            j: (
-                np.flatnonzero(labels == j),
-                to_matrix(pair.rotations_[j], pair.translations_[j]),
-            )
-            for j in np.flatnonzero(np.asarray(pair.moving_, dtype=bool))
-            if j != static and np.any(labels == j)
-        }
-        scale = float(getattr(pair, "ego_scale_", np.nan))
+    def _take_pair(self, previous, frame, fit):
+        """The pair's fit on the two frames: the first sweep's labels, flow, body and
+        ground, the second sweep's pose, and what the step reads of it."""
+        previous.ego = fit.ego
+        frame.pose = compose(previous.pose, inverse(fit.ego))
+        previous.pair_labels = fit.labels
+        previous.pair_flow = fit.flow
+        previous.body = fit.body
+        frame.body = fit.sweep_body
+        scale = fit.scale
         previous.scale = scale if np.isfinite(scale) and scale > 0 else 0.002 * self.tau
-        previous.ground = _mask(getattr(pair, "ground_mask_", None), len(first))
+        previous.ground = fit.ground
         return _Pair(
-            ego=ego,
+            ego=fit.ego,
             scale=previous.scale,
-            ground=previous.ground,
-            sweep_ground=_mask(getattr(pair, "sweep_ground_mask_", None), len(second)),
-            detections=detections,
+            ground=fit.ground,
+            sweep_ground=fit.sweep_ground,
+            detections=dict(fit.detections),
         )
 
     def _predict(self, time, pose):
@@ -1216,18 +1179,15 @@ class LogTracker:
 @dataclass
 class _LogState:
     rng: np.random.RandomState  # the points a track keeps
-    pair_rng: np.random.RandomState  # the pairs' seeds
     tracks: list = field(default_factory=list)
     identity: dict = field(default_factory=dict)
     alias: dict = field(default_factory=dict)  # a joined track's key -> the track it joined
     last_seen: dict = field(default_factory=dict)  # track key -> the last frame it was seen in
     pending: list = field(default_factory=list)
     previous: LogFrame | None = None
-    last_ego: tuple | None = None
     n_frames: int = 0
     next_key: int = 0
     n_confirmed: int = 0
-    bodiless: int = 0  # pairs in a row that would have shown the ego body and showed none
 
     last_first: LogFrame | None = None  # the last frame that was a pair's first sweep
     recent: list = field(default_factory=list)  # past first sweeps, for the long span
@@ -1252,23 +1212,17 @@ class _Pair:
     detections: dict  # moving cluster -> (rows, 4 x 4 motion)
 
 
-class _Anything:
-    """Contains every name: the parameters of a ``fit(**kwargs)``."""
-
-    def __contains__(self, name):
-        return True
-
-
-def _fit_parameters(estimator):
-    """The keyword parameters of ``estimator.fit`` (everything, for ``**kwargs``)."""
-    parameters = inspect.signature(estimator.fit).parameters
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
-        return _Anything()
-    return set(parameters)
-
-
-def _mask(values, n):
-    return np.zeros(n, dtype=bool) if values is None else np.asarray(values, dtype=bool)
+def _take_states(states, previous, frame):
+    """Keep the sweeps' states that a pair fitted in another process gave back
+    (``states``: the first sweep's and the second's): a frame with a state of its own
+    takes the surface normals it lacks from the one given."""
+    if states is None:
+        return
+    for sweep, state in zip((previous, frame), states, strict=True):
+        if sweep.state is None:
+            sweep.state = state
+        elif state is not None:
+            sweep.state.learn(state)
 
 
 def _on_evidence(points, rows, shown, still, cell):
