@@ -12,6 +12,7 @@ from sklearn.base import BaseEstimator, clone
 from mmreg import SequenceRegistration, SweepRegistration
 from mmreg.datasets import make_lidar_sequence
 from mmreg.datasets._lidar_sequence import _hidden_mover_log
+from mmreg.estimators._sequence import _PairMaker
 from mmreg.tracking import _log
 
 
@@ -87,7 +88,7 @@ def test_tau_sets_the_units_of_the_log_and_of_its_pairs(street):
     scale = 1000.0
     frames = [frame * scale for frame in log.frames]
     est = SequenceRegistration(tau=5.0 * scale, random_state=0).fit(frames, times=log.times)
-    assert est._pair_estimator(0).get_params()["tau"] == 5.0 * scale
+    assert _PairMaker(est.pair_estimator, est.tau)(0).get_params()["tau"] == 5.0 * scale
     # (Pairs taken at tau 5 in any units found a tenth of the moving points here, and a
     # level ICP whose turn was weighed in square units 98-99 % of the labels.)
     for mm, m in zip(est.labels_, metres.labels_, strict=True):
@@ -481,14 +482,14 @@ def test_what_a_track_keeps_does_not_reseed_the_pairs(monkeypatch):
 
     def seeds_of_a_fit():
         seeds = []
-        make = SequenceRegistration._pair_estimator
+        make = _PairMaker.__call__
 
         def recording(self, seed):
             seeds.append(seed)
             return make(self, seed)
 
         with monkeypatch.context() as patch:
-            patch.setattr(SequenceRegistration, "_pair_estimator", recording)
+            patch.setattr(_PairMaker, "__call__", recording)
             est = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
         return seeds, est
 

@@ -106,6 +106,16 @@ class SurfaceNormals:
         self._table = np.full((len(points), 5), np.nan)
         self._spacing = np.full(len(points), np.nan)
 
+    def learn(self, other):
+        """Take the normals and spacings that ``other``, the normals of the same points
+        (a copy in another process), computed and these did not."""
+        if other._table.shape != self._table.shape:
+            raise ValueError("other must hold the normals of the same points.")
+        rows = np.isnan(self._table[:, 3]) & ~np.isnan(other._table[:, 3])
+        self._table[rows] = other._table[rows]
+        rows = np.isnan(self._spacing) & ~np.isnan(other._spacing)
+        self._spacing[rows] = other._spacing[rows]
+
     def _missing(self, index, known):
         """The distinct points of ``index`` (sorted) whose ``known`` value is still NaN."""
         unknown = index[np.isnan(known[index])]

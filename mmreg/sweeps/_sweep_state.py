@@ -60,6 +60,28 @@ class SweepState:
         self.workers = workers
         self._memo = {}
 
+    def __getstate__(self):
+        # What it computed of its own points goes with it; the ego motion's clouds
+        # (small_gicp's, which do not pickle) and the subsets' states are made again
+        # where they are asked for.
+        memo = {
+            key: value
+            for key, value in self._memo.items()
+            if not (isinstance(key, tuple) and key[0] in ("ego_cloud", "subset"))
+        }
+        return {"points": self.points, "workers": self.workers, "_memo": memo}
+
+    def learn(self, other):
+        """Keep what ``other``, the state of the same points (a copy that went to another
+        process), computed and this one did not; their normals are merged."""
+        if other.points.shape != self.points.shape:
+            raise ValueError("other must be the state of the same points.")
+        for key, value in other._memo.items():
+            if key not in self._memo:
+                self._memo[key] = value
+            elif key == "normals":
+                self._memo[key].learn(value)
+
     def _cached(self, key, make):
         """``make()`` the first time ``key`` is asked for, the same object after."""
         try:
