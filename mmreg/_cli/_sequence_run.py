@@ -113,6 +113,7 @@ def _estimator(args):
         tau=tau,
         frame_rate=args.frame_rate,
         voxel_size=getattr(args, "voxel_size", None),
+        n_jobs=getattr(args, "jobs", None),
         random_state=args.seed,
     )
 

@@ -871,6 +871,7 @@ def dask_client(scheduler, n_workers, needed_by="run_dataset"):
     """A Dask client on the cluster at ``scheduler``, or on a new LocalCluster of
     ``n_workers`` processes (``needed_by`` names the caller in the missing-package error)."""
     try:
+        import dask
         from distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the installation
         raise ImportError(f"{needed_by} needs dask.distributed: pip install 'mmreg[dask]'") from exc
@@ -878,7 +879,8 @@ def dask_client(scheduler, n_workers, needed_by="run_dataset"):
         if scheduler is None:
             # One thread per worker: the fits use numpy/scipy, which hold the GIL between
             # the vectorised calls, so processes (not threads) run jobs side by side.
-            with _children_ignore_ctrl_c():
+            # Not daemonic: a log's fit may start a process of its own for its pairs.
+            with _children_ignore_ctrl_c(), dask.config.set({"distributed.worker.daemon": False}):
                 cluster = stack.enter_context(
                     LocalCluster(
                         n_workers=n_workers,

@@ -986,7 +986,11 @@ def _log_fingerprint(job, estimator, describe):
     """What a log's result depends on: the job, the estimator with its parameters, mmreg."""
     import hashlib
 
+    from sklearn.base import clone
+
     from mmreg import __version__
 
+    if "n_jobs" in estimator.get_params(deep=False):  # the same results on any number
+        estimator = clone(estimator).set_params(n_jobs=None)
     text = "\n".join(["log", repr(job), describe(estimator), __version__])
     return hashlib.sha256(text.encode("utf-8", "surrogateescape")).hexdigest()[:16]
