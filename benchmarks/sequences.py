@@ -16,7 +16,8 @@ The logs:
   a frame): cars cruising, braking and passing, walkers, cyclists, parked cars, with every
   object's id in every frame.
 
-For each log, ``SequenceRegistration(random_state=0)`` (times from the log) and, with
+For each log, ``SequenceRegistration(random_state=0, n_jobs=2)`` (times from the log; its
+pairs in a process of their own beside the tracks, ``--jobs``) and, with
 ``--pairs``, ``SweepRegistration(random_state=0)`` on every pair alone (its moving
 clusters, frame k's labels from pair (k, k+1); the last frame has none). Columns:
 
@@ -33,7 +34,8 @@ clusters, frame k's labels from pair (k, k+1); the last frame has none). Columns
 * ``false/frame``: tracks or clusters called moving of which less than half the points
   move, per frame; ``ID sw``: identity switches (CLEAR-MOT);
 * ``s/frame``: wall seconds per frame of the fit, and ``KISS-ICP``: its odometry's on the
-  same frames (``benchmarks/kiss_odometry.py``'s settings, one thread), each the median
+  same frames (``benchmarks/kiss_odometry.py``'s settings, as many threads as the fit's
+  processes: two on this machine's two cores), each the median
   of ``--repeats`` runs (3) taken in turns, one of each at a time: the machine's speed
   drifts by a tenth or more between runs, a short KISS-ICP run's by a third, and runs
   side by side see the same machine (the load average is in the header); ``x KISS``:
@@ -203,15 +205,17 @@ def scores(log, labels, moving, seconds):
     }
 
 
-def run_sequence(log, repeats=3):
+def run_sequence(log, repeats=3, jobs=2):
     """The sequence's scores, and its seconds a frame and KISS-ICP's: the medians of
-    ``repeats`` runs of each, taken in turns (every fit gives the same labels)."""
+    ``repeats`` runs of each, taken in turns (every fit gives the same labels), the fit
+    on ``jobs`` processes and KISS-ICP on as many threads."""
     seconds, kiss = [], []
     for _ in range(repeats):
         start = time.perf_counter()
-        est = SequenceRegistration(random_state=0).fit(log["frames"], times=log["times"])
+        est = SequenceRegistration(random_state=0, n_jobs=jobs)
+        est.fit(log["frames"], times=log["times"])
         seconds.append((time.perf_counter() - start) / len(log["frames"]))
-        kiss.append(kiss_seconds(log))
+        kiss.append(kiss_seconds(log, jobs))
     row = scores(log, est.labels_, est.moving_, float(np.median(seconds)))
     truth = log["poses"]
     errors = [
@@ -247,13 +251,13 @@ def run_pairs(log):
     return row
 
 
-def kiss_seconds(log):
-    """KISS-ICP's odometry's seconds a frame on the log's frames, one run (NaN without
-    kiss-icp)."""
+def kiss_seconds(log, threads=1):
+    """KISS-ICP's odometry's seconds a frame on the log's frames, one run on ``threads``
+    threads (NaN without kiss-icp)."""
     try:
         from kiss_odometry import kiss_icp_odometry
 
-        result = kiss_icp_odometry(log["frames"], max_num_threads=1)
+        result = kiss_icp_odometry(log["frames"], max_num_threads=threads)
     except ImportError:  # kiss-icp not installed
         return np.nan
     return float(np.mean(result.wall_s))
@@ -286,6 +290,12 @@ def main(argv=None):
     parser.add_argument(
         "--repeats", type=int, default=3, help="timed runs of each method (the median)"
     )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=2,
+        help="the fit's processes (n_jobs) and KISS-ICP's threads (default: 2)",
+    )
     parser.add_argument("--out", default=str(HERE / "results" / "sequences"))
     args = parser.parse_args(argv)
     logs = []
@@ -307,12 +317,17 @@ def main(argv=None):
         f"load average at start: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs), "
         f"python {sys.version.split()[0]}, numpy {np.__version__}, "
         f"machine speed (`real.machine_speed`, a k-d tree's 8-NN pass over 100,000 "
-        f"points) {before:.3f} s before the run"
+        f"points) {before:.3f} s before the run; the fit with n_jobs={args.jobs}, KISS-ICP "
+        f"with max_num_threads={args.jobs}"
     )
     print(header, flush=True)
     rows = []
     for name, log in logs:
-        row = {"log": name, "method": "SequenceRegistration", **run_sequence(log, args.repeats)}
+        row = {
+            "log": name,
+            "method": "SequenceRegistration",
+            **run_sequence(log, args.repeats, args.jobs),
+        }
         kiss = row["KISS-ICP s/frame"]
         row["x KISS"] = row["s/frame"] / kiss if kiss == kiss else np.nan
         rows.append(row)
