@@ -168,13 +168,16 @@ class PairProcess:
 
     def __init__(self):
         context = get_context("loky")
-        self._frames = context.Queue()
-        self._fits = context.Queue()
+        self._frames = context.Queue()  # its feeder thread sends them: no wait here
+        # The fits come through a pipe whose writing end only the worker holds: if it
+        # dies, even halfway through a fit, the reading end here reads the end of it.
+        self._fits, writer = context.Pipe(duplex=False)
         self._ready = context.Event()
         self._process = context.Process(
-            target=_serve, args=(self._frames, self._fits, self._ready), daemon=True
+            target=_serve, args=(self._frames, writer, self._ready), daemon=True
         )
         self._process.start()
+        writer.close()
         # A log left unfinished (an online log dropped, an error) ends its worker too.
         self._ending = weakref.finalize(self, _end, self._process, self._frames, self._fits)
 
@@ -211,20 +214,21 @@ class PairProcess:
 
     def receive(self):
         """The next pair's fit; raises what the worker raised."""
-        while True:
-            try:
-                kind, value = self._fits.get(timeout=_POLL)
-                break
-            except queue.Empty:
+        try:
+            while not self._fits.poll(_POLL):
                 if not self._process.is_alive():
-                    raise RuntimeError(
-                        "the process registering the log's pairs ended unexpectedly "
-                        f"(exit code {self._process.exitcode})."
-                    ) from None
+                    raise EOFError
+            kind, value = pickle.loads(self._fits.recv_bytes())
+        except (EOFError, OSError):
+            self._process.join(timeout=_POLL)
+            raise RuntimeError(
+                "the process registering the log's pairs ended unexpectedly "
+                f"(exit code {self._process.exitcode})."
+            ) from None
         if kind == "error":
-            error, text = pickle.loads(value)
+            error, text = value
             raise error from _RemoteTraceback(text)
-        return pickle.loads(value)
+        return value
 
     def close(self):
         """End the worker (at once, if it is still busy)."""
@@ -280,7 +284,7 @@ def _serve(frames, fits, ready):
             except Exception as error:
                 _report(fits, error)
                 return
-            fits.put(("started", _dumps(None)))
+            fits.send_bytes(_dumps(("started", None)))
             if not _fit_pairs(chain, frames, fits):
                 return
 
@@ -295,8 +299,7 @@ def _fit_pairs(chain, frames, fits):
         frame = pickle.loads(message)
         if previous is not None:
             try:
-                # Pickled before the next pair adds to the states it holds.
-                fits.put(("fit", _dumps(chain.fit_apart(previous, frame))))
+                fits.send_bytes(_dumps(("fit", chain.fit_apart(previous, frame))))
             except BaseException as error:  # to the caller, who raises it
                 _report(fits, error)
                 return False
@@ -308,9 +311,10 @@ def _report(fits, error):
     """Send ``error`` with its traceback to the caller."""
     text = traceback.format_exc()
     try:
-        fits.put(("error", _dumps((error, text))))
+        message = _dumps(("error", (error, text)))
     except Exception:  # an error that does not pickle
-        fits.put(("error", _dumps((RuntimeError(repr(error)), text))))
+        message = _dumps(("error", (RuntimeError(repr(error)), text)))
+    fits.send_bytes(message)
 
 
 def _dumps(value):
