@@ -19,11 +19,10 @@ decisions cost far less:
 """
 
 import contextlib
-import functools
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
+from mmreg._array.threads import single_threaded_blas
 from mmreg.em._gate import gated_argmax
 
 __all__ = ["CorrespondenceBlocks", "classify"]
@@ -42,21 +41,6 @@ _BLOCK_CELLS = 2**20
 # Bits of the Morton code per axis (at most 30 bits in all).
 _MORTON_BITS = 10
 _EPS = np.finfo(float).eps
-
-
-@functools.cache
-def _blas_controller():
-    return ThreadpoolController()
-
-
-def single_threaded_blas():
-    """Context in which BLAS runs on one thread.
-
-    The products here are small (a block of rows times a few dozen motions): a second
-    BLAS thread only adds synchronisation, which costs far more than the product as
-    soon as the cores are busy.
-    """
-    return _blas_controller().limit(limits=1, user_api="blas")
 
 
 def morton_order(points, bits=_MORTON_BITS):

@@ -93,7 +93,7 @@ class SequenceRegistration(BaseEstimator):
     n_jobs : int or None, default=None
         Processes: with 2 or more (-1: every core, if there are two), the pairs are
         registered in a process of their own, ahead of the tracks, which run in this one.
-        The results are the same, in about two thirds of the time on two cores; online,
+        The results are the same, in 0.6-0.8 of the time on two cores; online,
         each frame's result comes one frame later. None: one (scikit-learn's
         convention).
     random_state : int, RandomState instance or None, default=None

@@ -28,8 +28,8 @@ import weakref
 
 from joblib.externals.loky.backend.context import get_context
 
+from mmreg._array.threads import single_threaded_blas
 from mmreg._warnings import warn
-from mmreg.em._likelihood import single_threaded_blas
 
 __all__ = ["PairProcess", "PairsAhead"]
 
