@@ -278,7 +278,7 @@ def add_arguments(parser):
         default=2,
         help="logs: processes per log; 2 or more registers the pairs in a process of their "
         "own while this one keeps the tracks (the same results in 0.6-0.8 of the "
-        "time), 1 runs both in one (default: 2)",
+        "time), 1 runs both in one",
     )
     parser.add_argument(
         "--frame-rate",
