@@ -88,7 +88,9 @@ def test_ctrl_c_always_exits_130_and_leaves_nothing(tmp_path):
             stderr = "".join(lines)
             if code == 130:
                 assert stderr.rstrip().endswith("mmreg: interrupted"), stderr
-                assert not out.exists()
+                # Nothing half-written: no result, or, where the signal came after the
+                # result's one rename (a busy machine delays it), the whole result.
+                assert not out.exists() or (out / "run.json").exists()
             else:  # finished before the signal: a whole result
                 assert code == 0, stderr
                 assert (out / "run.json").exists()
