@@ -21,6 +21,7 @@ A frame's result is final ``lookahead`` frames later. Only the tracks and the pe
 frames are kept.
 """
 
+import dataclasses
 import functools
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -777,13 +778,8 @@ class LogTracker:
         scale = fit.scale
         previous.scale = scale if np.isfinite(scale) and scale > 0 else 0.002 * self.tau
         previous.ground = fit.ground
-        return _Pair(
-            ego=fit.ego,
-            scale=previous.scale,
-            ground=fit.ground,
-            sweep_ground=fit.sweep_ground,
-            detections=dict(fit.detections),
-        )
+        # The step takes the detections it associates out of its own copy.
+        return dataclasses.replace(fit, scale=previous.scale, detections=dict(fit.detections))
 
     def _predict(self, time, pose):
         """Every track's points predicted to ``time``, in the sensor frame at ``pose``,
@@ -1199,17 +1195,6 @@ class _Span(NamedTuple):
     frame: LogFrame
     back: np.ndarray  # 4 x 4, the pair's first sweep to ``frame``
     scale: float  # its residual scale, the pairs' added
-
-
-@dataclass
-class _Pair:
-    """What a step needs of the pair's fit."""
-
-    ego: np.ndarray  # 4 x 4, first sweep to second
-    scale: float  # the ego ICP's robust residual scale
-    ground: np.ndarray  # the first sweep's ground (valid rows)
-    sweep_ground: np.ndarray  # the second sweep's
-    detections: dict  # moving cluster -> (rows, 4 x 4 motion)
 
 
 def _take_states(states, previous, frame):
