@@ -351,3 +351,22 @@ def test_run_voxel_size_thins_the_frames(tmp_path):
         np.testing.assert_array_equal(labels.semantic, first[group])
     with pytest.raises(SystemExit):
         main(["run", str(folder), "--out", str(tmp_path / "bad"), "--voxel-size", "0"])
+
+
+def test_a_log_in_other_units_than_tau_is_told_so_without_verbose(tmp_path, capsys):
+    """A log in centimetres run with the default --tau (metres): the result shows no
+    motion, and the run says why on the console, -v or not."""
+    from mmreg.cli import main
+    from mmreg.datasets import make_lidar_sequence
+
+    log = make_lidar_sequence(3, frame_rate=10.0, n_azimuths=256, random_state=0)
+    folder = tmp_path / "centimetres"
+    folder.mkdir()
+    for k, points in enumerate(log.frames):
+        np.save(folder / f"scan{k}.npy", points * 100.0)
+    command = ["run", str(folder), "--frame-rate", "10"]
+    assert main([*command, "--out", str(tmp_path / "metres")]) == 0
+    said = capsys.readouterr().out
+    assert "centimetres: warning: tau=5 spans fewer than 4 times the median distance" in said
+    assert main([*command, "--out", str(tmp_path / "told"), "--tau", "500"]) == 0
+    assert "warning" not in capsys.readouterr().out

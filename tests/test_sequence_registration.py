@@ -5,6 +5,9 @@ only is dropped, an object keeps its id through an occlusion, a parked car is ne
 moving, a car's speed is measured in m/s; and online equals batch.
 """
 
+import re
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.base import BaseEstimator, clone
@@ -12,6 +15,7 @@ from sklearn.base import BaseEstimator, clone
 from mmreg import SequenceRegistration, SweepRegistration
 from mmreg.datasets import make_lidar_sequence
 from mmreg.datasets._lidar_sequence import _hidden_mover_log
+from mmreg.estimators import ScaleWarning
 from mmreg.estimators._sequence import _PairMaker
 from mmreg.tracking import _log
 
@@ -87,13 +91,61 @@ def test_tau_sets_the_units_of_the_log_and_of_its_pairs(street):
     log, metres = street
     scale = 1000.0
     frames = [frame * scale for frame in log.frames]
-    est = SequenceRegistration(tau=5.0 * scale, random_state=0).fit(frames, times=log.times)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScaleWarning)  # tau is in the frames' units
+        est = SequenceRegistration(tau=5.0 * scale, random_state=0).fit(frames, times=log.times)
     assert _PairMaker(est.pair_estimator, est.tau)(0).get_params()["tau"] == 5.0 * scale
     # (Pairs taken at tau 5 in any units found a tenth of the moving points here, and a
     # level ICP whose turn was weighed in square units 98-99 % of the labels.)
     for mm, m in zip(est.labels_, metres.labels_, strict=True):
         assert np.mean(mm == m) > 0.999
     assert est.n_tracks_ == metres.n_tracks_
+
+
+@pytest.fixture(scope="module")
+def two_frames():
+    return make_lidar_sequence(2, frame_rate=10.0, n_azimuths=256, random_state=0)
+
+
+def _scale_warnings(record):
+    return [w for w in record if w.category is ScaleWarning]
+
+
+def test_a_log_in_other_units_than_tau_warns_at_the_users_line(two_frames):
+    # A street sampled every 3-7 cm, in centimetres: tau=5 spans a few spacings.
+    frames = [frame * 100.0 for frame in two_frames.frames]
+    message = "tau=5 spans fewer than 4 times the median distance between neighbouring"
+    with pytest.warns(ScaleWarning, match=message) as record:
+        SequenceRegistration(random_state=0).fit(frames, times=two_frames.times)
+    (warning,) = _scale_warnings(record)
+    assert warning.filename == __file__
+    online = SequenceRegistration(random_state=0)
+    with pytest.warns(ScaleWarning, match=message) as record:
+        online.partial_fit(frames[0], time=0.0)
+    assert len(_scale_warnings(record)) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScaleWarning)  # once, at the log's first frame
+        online.partial_fit(frames[1], time=0.1)
+        online.finish()
+    # In kilometres, tau=5 spans the street many times over.
+    kilometres = two_frames.frames[0] * 1e-3
+    with pytest.warns(ScaleWarning, match="tau=5 exceeds the diagonal of the first frame"):
+        SequenceRegistration().partial_fit(kilometres, time=0.0)
+
+
+@pytest.mark.parametrize(("unit", "shown"), [(1e3, "100 apart"), (1e9, "1e+08 apart")])
+def test_times_in_milliseconds_or_nanoseconds_warn(two_frames, unit, shown):
+    times = np.asarray(two_frames.times) * unit + 1.7e9 * unit  # a clock's epoch times
+    with pytest.warns(ScaleWarning, match=f"times are {re.escape(shown)}.*milliseconds") as record:
+        SequenceRegistration(random_state=0).fit(two_frames.frames, times=times)
+    assert len(_scale_warnings(record)) == 1
+    online = SequenceRegistration(random_state=0).partial_fit(two_frames.frames[0], time=times[0])
+    with pytest.warns(ScaleWarning, match=re.escape(shown)):
+        online.partial_fit(two_frames.frames[1], time=times[1])
+    # In seconds, from the same epoch: no warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScaleWarning)
+        SequenceRegistration(random_state=0).fit(two_frames.frames, times=times / unit)
 
 
 def test_a_ghost_seen_in_one_pair_is_dropped(street):

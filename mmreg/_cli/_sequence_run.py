@@ -199,12 +199,11 @@ def run_sequences(args, jobs):
             _print_log(out, summary.iloc[0], elapsed, resuming, plan, verbose)
         else:
             _print_logs(summary, elapsed, resuming, plan)
-        if verbose:
-            from mmreg._cli.dataset import print_plan, print_warnings
+        from mmreg._cli.dataset import print_plan, print_warnings
 
+        if verbose:
             print_plan(plan, {"total_s": elapsed})
-            if "warnings" in summary:
-                print_warnings(summary["log"], summary["warnings"])
+        print_warnings(summary["log"], summary, verbose=verbose)
         if plan.get("redrawn"):
             print(f"{plural(plan['redrawn'], 'log')}' pictures drawn from the finished results")
     print(f"written: {_written(out, jobs, single)}")

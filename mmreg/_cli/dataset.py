@@ -738,11 +738,19 @@ def print_jobs(summary, *, verbose=False):
     print(f"{label}s:" if step == 1 else f"{label}:")
     header = ["job", "points", "moving objects", "static world", f"fastest [{unit}]", "fit [s]"]
     print(table(header, rows))
-    if verbose and "warnings" in summary:
-        print_warnings(summary["job"], summary["warnings"])
+    print_warnings(summary["job"], summary, verbose=verbose)
 
 
-def print_warnings(names, warnings):
+def print_warnings(names, summary, *, verbose=False):
+    """Each warning once, with the jobs (or logs) that gave it: every one with
+    ``verbose``, else those that say the units are wrong (the results are, as they
+    stand)."""
+    column = "warnings" if verbose else "units_warnings"
+    if column in summary:
+        _print_warnings(names, summary[column])
+
+
+def _print_warnings(names, warnings):
     """-v: each warning once, with the jobs (or logs) that gave it."""
     by_text = {}
     for name, text in zip(names, warnings, strict=True):

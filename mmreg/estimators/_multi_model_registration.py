@@ -69,7 +69,8 @@ _SAME_TURN_DEGREES = 10.0
 
 
 class ScaleWarning(UserWarning):
-    """``tau`` does not fit the scale of the points (are they in other units?)."""
+    """``tau`` does not fit the scale of the points, or times their intervals (are they
+    in other units?)."""
 
 
 def median_spacing(points, random_state=0, neighbours=None):
@@ -89,6 +90,35 @@ def median_spacing(points, random_state=0, neighbours=None):
         return float(np.median(neighbours.distance[sample, 1]))
     dist, _ = cKDTree(points).query(points[sample], k=2)
     return float(np.median(dist[:, 1]))
+
+
+def tau_off_scale(points, tau, neighbours=None):
+    """How a gate ``tau`` misses the scale of ``points`` (units other than the points'):
+    ``("spacing", s)`` where it spans fewer than four of their median nearest-neighbour
+    distances ``s`` (:func:`median_spacing`), ``("diameter", d)`` where it exceeds the
+    diagonal ``d`` of their bounding box; a list of both, one or none.
+
+    Examples
+    --------
+    A street in centimetres, sampled every 10 cm, judged with the 5 (metres) of LiDAR:
+
+    >>> import numpy as np
+    >>> from mmreg.estimators._multi_model_registration import tau_off_scale
+    >>> g = np.arange(0.0, 5000.0, 10.0)
+    >>> street = np.stack(np.meshgrid(g, g[:50], [0.0], indexing="ij"), -1).reshape(-1, 3)
+    >>> [name for name, _ in tau_off_scale(street, 5.0)], tau_off_scale(street, 500.0)
+    (['spacing'], [])
+    """
+    problems = []
+    spacing = median_spacing(points, neighbours=neighbours)
+    if tau < _MIN_GATE_SPACINGS * spacing:
+        problems.append(("spacing", spacing))
+    # Coincident points (diameter 0) are another problem (a DegenerateInputWarning).
+    low, high = column_bounds(points)
+    diameter = float(np.linalg.norm(high - low))
+    if 0 < _MAX_GATE_DIAMETERS * diameter < tau:
+        problems.append(("diameter", diameter))
+    return problems
 
 
 class MultiModelRegistration(BaseRegistration):
@@ -854,26 +884,23 @@ class MultiModelRegistration(BaseRegistration):
     def _warn_if_tau_off_scale(self, a, neighbours=None):
         if self.tau is None:
             return
-        spacing = median_spacing(a, neighbours=neighbours)
-        if self.tau < _MIN_GATE_SPACINGS * spacing:
-            warn(
-                f"tau={self.tau:g} spans fewer than {_MIN_GATE_SPACINGS:g} times the median "
-                f"distance between neighbouring a-points ({spacing:.3g}): clusters can grow "
-                "by a point or two per iteration and hardly merge. Are tau and the points in "
-                "the same units?",
-                ScaleWarning,
-            )
-        # Coincident a-points (diameter 0) get a DegenerateInputWarning instead.
-        low, high = column_bounds(a)
-        diameter = float(np.linalg.norm(high - low))
-        if 0 < _MAX_GATE_DIAMETERS * diameter < self.tau:
-            warn(
-                f"tau={self.tau:g} exceeds the diagonal of the a-points' bounding box "
-                f"({diameter:.3g}): the gate of eq. (7) joins any two points of the scene, "
-                "so objects that move alike merge however far apart they are. Are tau and "
-                "the points in the same units? (tau=None turns the gate off on purpose.)",
-                ScaleWarning,
-            )
+        for problem, length in tau_off_scale(a, self.tau, neighbours):
+            if problem == "spacing":
+                message = (
+                    f"tau={self.tau:g} spans fewer than {_MIN_GATE_SPACINGS:g} times the median "
+                    f"distance between neighbouring a-points ({length:.3g}): clusters can grow "
+                    "by a point or two per iteration and hardly merge. Are tau and the points "
+                    "in the same units?"
+                )
+            else:
+                message = (
+                    f"tau={self.tau:g} exceeds the diagonal of the a-points' bounding box "
+                    f"({length:.3g}): the gate of eq. (7) joins any two points of the scene, "
+                    "so objects that move alike merge however far apart they are. Are tau "
+                    "and the points in the same units? (tau=None turns the gate off on "
+                    "purpose.)"
+                )
+            warn(message, ScaleWarning)
 
     def predict(self, X):
         """Assign correspondences to the fitted motions.

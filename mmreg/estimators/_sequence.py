@@ -19,6 +19,13 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval
 
 from mmreg._array.neighbors import query_workers
+from mmreg._validation import invalid_points
+from mmreg._warnings import warn
+from mmreg.estimators._multi_model_registration import (
+    _MIN_GATE_SPACINGS,
+    ScaleWarning,
+    tau_off_scale,
+)
 from mmreg.tracking._log import LogTracker
 from mmreg.tracking._pair_process import PairsAhead
 
@@ -34,6 +41,10 @@ _PAIR_ICP_ITER = 15
 _PAIR_WIDEN_REACH = False
 # The default pair estimator's smallest island (SweepRegistration's min_island_size).
 _MIN_ISLAND_SIZE = 12
+# A LiDAR log's frames come 2-20 times a second. Frames further apart than this many
+# seconds leave nothing to track (a car drives 100 m or more between them): such times
+# are milliseconds or finer, most likely.
+_MAX_FRAME_INTERVAL = 10.0
 
 
 class SequenceRegistration(BaseEstimator):
@@ -214,6 +225,9 @@ class SequenceRegistration(BaseEstimator):
             times = [f.timestamp for f in frames]
         times = self._check_times(times, n)
         poses = self._check_poses(poses, n)
+        _warn_if_off_scale(getattr(frames[0], "points", frames[0]), self.tau)
+        if times is not None:
+            _warn_if_not_seconds(np.diff(times))
         if point_times is None and all(getattr(f, "times", None) is not None for f in frames):
             point_times = [f.times for f in frames]
         if point_times is not None and (times is None or len(point_times) != n):
@@ -285,11 +299,16 @@ class SequenceRegistration(BaseEstimator):
         """
         if not hasattr(self, "_run"):
             self._validate_params()
+            _warn_if_off_scale(points, self.tau)
             self._reset(processes=query_workers(self.n_jobs))
+        elif self._run.n_frames == 1 and time is not None and self._first_time is not None:
+            _warn_if_not_seconds([time - self._first_time])
         if pose is not None:
             pose = self._check_poses(np.asarray(pose, dtype=float)[None], 1)[0]
         if point_times is not None and time is None:
             raise ValueError("point_times goes with time: the frame's time in seconds.")
+        if self._run.n_frames == 0:
+            self._first_time = time
         self.finished_ = self._run.add(points, time, pose, point_times)
         return self
 
@@ -344,6 +363,50 @@ class SequenceRegistration(BaseEstimator):
             if isinstance(value, Integral):
                 return int(value)
         return _MIN_ISLAND_SIZE
+
+
+def _warn_if_off_scale(points, tau):
+    """A :class:`~mmreg.estimators.ScaleWarning` where ``tau`` does not fit a log's first frame
+    (:func:`~mmreg.estimators._multi_model_registration.tau_off_scale`): every length of
+    the pairs and the tracks is a share of it, and a log in centimetres judged in
+    metres finds nothing moving, however clear the motion."""
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] < 3:
+        return  # the frame's own check names the problem
+    points = points[:, :3]
+    points = points[~invalid_points(points)]
+    if len(points) < 2:
+        return
+    for problem, length in tau_off_scale(points, tau):
+        if problem == "spacing":
+            found = (
+                f"spans fewer than {_MIN_GATE_SPACINGS:g} times the median distance between "
+                f"neighbouring points of the first frame ({length:.3g})"
+            )
+        else:
+            found = f"exceeds the diagonal of the first frame's bounding box ({length:.3g})"
+        warn(
+            f"tau={tau:g} {found}: every length of the pairs and the tracks is a share of "
+            "tau, so the log will show no motion as it is. tau is in the points' units: 5 "
+            "for metres (500 for centimetres, 5000 for millimetres).",
+            ScaleWarning,
+        )
+
+
+def _warn_if_not_seconds(intervals):
+    """A :class:`~mmreg.estimators.ScaleWarning` where frames come more than
+    ``_MAX_FRAME_INTERVAL`` apart by their times (the median of ``intervals``): the
+    times are milliseconds or finer, most likely, and the velocities and the
+    half-second spans would be read in the wrong units."""
+    interval = float(np.median(intervals))
+    if interval > _MAX_FRAME_INTERVAL:
+        warn(
+            f"the frames' times are {interval:.3g} apart, frame to frame: times are in "
+            "seconds, and a log's frames come a fraction of a second apart. Are they "
+            "milliseconds (times * 1e-3) or nanoseconds (times * 1e-9)? Velocities "
+            "(tracks_) and the half-second spans follow the times.",
+            ScaleWarning,
+        )
 
 
 class _PairMaker:

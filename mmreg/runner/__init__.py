@@ -99,6 +99,7 @@ from mmreg.runner._jobs import (
     SweepPairJob,
     check_jobs,
     dataset_jobs,
+    warning_columns,
 )
 from mmreg.runner._logs import LogJob, fit_log, log_jobs, run_logs
 from mmreg.runner._workers import run_tasks, task_threads
@@ -533,7 +534,7 @@ def _process(job, estimator, pictures=False):
             n_ego_body=int(body.sum()),
             n_iter=int(getattr(model, "n_iter_", -1)),
             converged=bool(getattr(model, "converged_", True)),
-            warnings=" | ".join(sorted({str(w.message) for w in [*loading, *caught]}))[:500],
+            **warning_columns([*loading, *caught]),
         )
         found = getattr(model, "ground_mask_", None)
         if found is not None and row["ground"] in (None, "kept"):
@@ -1020,7 +1021,8 @@ def run_dataset(
         ``n_outliers`` (label -1, the ego vehicle's body left out), ``n_ego_body`` (returns
         from the ego vehicle's own body), ``n_no_return`` (rows of the first sweep that
         hold no return, left out), ``n_iter``, ``converged``, ``load_s``, ``fit_s`` (seconds, on the
-        worker), ``resumed`` (read from an earlier run), ``error``, ``warnings``, and with
+        worker), ``resumed`` (read from an earlier run), ``error``, ``warnings``
+        (``units_warnings``: those that say the units are wrong), and with
         the truth ``iou``, ``objects_found``, ``moving_objects``, ``moving_found``
         (objects besides the largest found with IoU >= 0.5), ``epe3d``, ``acc3ds``,
         ``acc3dr``, ``outliers3d`` (of the rigid flow, :func:`mmreg.metrics.

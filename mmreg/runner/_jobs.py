@@ -972,3 +972,17 @@ def check_jobs(jobs):
     if repeated:
         raise ValueError(f"job names must be unique; repeated: {repeated[:3]}.")
     return jobs
+
+
+def warning_columns(caught):
+    """The warnings ``caught`` as a job's or a log's row keeps them: ``warnings``, each
+    message once, and ``units_warnings``, those that say a length or the times are not
+    in the points' units (:class:`~mmreg.estimators.ScaleWarning`). The command line
+    shows those without ``-v``: the result is wrong as it stands."""
+    from mmreg.estimators import ScaleWarning
+
+    def joined(found):
+        return " | ".join(sorted({str(w.message) for w in found}))[:500]
+
+    units = [w for w in caught if issubclass(w.category, ScaleWarning)]
+    return {"warnings": joined(caught), "units_warnings": joined(units)}

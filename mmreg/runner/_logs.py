@@ -61,6 +61,7 @@ from mmreg.runner._jobs import (
     _is_sequence,
     _sequence_folders,
     _valid_rows,
+    warning_columns,
 )
 from mmreg.runner._workers import run_tasks, task_threads
 
@@ -625,7 +626,7 @@ def _process_log(job, estimator, pictures, report=None):
             warnings.simplefilter("always")
             result = fit_log(job, estimator, pictures=pictures, report=report)
         row = result["row"]
-        row["warnings"] = " | ".join(sorted({str(w.message) for w in caught}))[:500]
+        row.update(warning_columns(caught))
     except Exception as error:  # one log's failure is its row, not the run's end
         row["error"] = f"{type(error).__name__}: {' '.join(str(error).split())}"[:1000]
         return job.name, None, row
@@ -832,9 +833,9 @@ def run_logs(
         ``moving_objects_per_frame``, ``max_moving_objects``, ``s_per_frame`` (the fit's
         seconds per frame), ``points_per_frame``, ``load_s``, ``fit_s``,
         ``velocity_unit``, ``poses_given``, ``resumed``, ``error``, ``warnings``,
-        ``changed_input`` (a log run again because that file changed),
-        ``picture_error``; ``summary.attrs["plan"]``: where the logs ran, as
-        :func:`run_dataset`'s.
+        ``units_warnings`` (those that say the units are wrong), ``changed_input`` (a log
+        run again because that file changed), ``picture_error``;
+        ``summary.attrs["plan"]``: where the logs ran, as :func:`run_dataset`'s.
 
     Examples
     --------
@@ -946,7 +947,7 @@ def run_logs(
     frame = pd.DataFrame([rows[job.name] for job in jobs])
     columns = SUMMARY_COLUMNS + [c for c in frame.columns if c not in SUMMARY_COLUMNS]
     frame = frame.reindex(columns=columns)
-    for column in ("error", "changed_input", "warnings", "picture_error"):
+    for column in ("error", "changed_input", "warnings", "units_warnings", "picture_error"):
         if column in frame:
             frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
     if any(getattr(job, "folder", "") for job in jobs):
