@@ -370,3 +370,6 @@ def test_a_log_in_other_units_than_tau_is_told_so_without_verbose(tmp_path, caps
     assert "centimetres: warning: tau=5 spans fewer than 4 times the median distance" in said
     assert main([*command, "--out", str(tmp_path / "told"), "--tau", "500"]) == 0
     assert "warning" not in capsys.readouterr().out
+    # Each pair alone: the multi-model estimator's own warning, shown as well.
+    assert main([*command, "--out", str(tmp_path / "pairs"), "--pairs"]) == 0
+    assert ": warning: tau=5 spans fewer than 4 times" in capsys.readouterr().out
