@@ -148,6 +148,17 @@ def test_times_in_milliseconds_or_nanoseconds_warn(two_frames, unit, shown):
         SequenceRegistration(random_state=0).fit(two_frames.frames, times=times / unit)
 
 
+def test_a_frame_period_given_as_the_frame_rate_warns(two_frames):
+    # 0.05: the seconds between a 20 Hz sensor's frames, not its frames per second.
+    with pytest.warns(ScaleWarning, match=r"frame_rate=0\.05 puts the frames 20 s apart"):
+        SequenceRegistration(frame_rate=0.05, random_state=0).fit(two_frames.frames)
+    with pytest.warns(ScaleWarning, match="frame_rate is frames per second"):
+        SequenceRegistration(frame_rate=0.05).partial_fit(two_frames.frames[0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScaleWarning)
+        SequenceRegistration(frame_rate=20.0, random_state=0).fit(two_frames.frames)
+
+
 def test_a_ghost_seen_in_one_pair_is_dropped(street):
     log, _ = street
     k = 2

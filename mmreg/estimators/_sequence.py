@@ -41,8 +41,8 @@ _PAIR_ICP_ITER = 15
 _PAIR_WIDEN_REACH = False
 # The default pair estimator's smallest island (SweepRegistration's min_island_size).
 _MIN_ISLAND_SIZE = 12
-# A LiDAR log's frames come 2-20 times a second. Frames further apart than this many
-# seconds leave nothing to track (a car drives 100 m or more between them): such times
+# A LiDAR log's frames come 2-20 times a second. Frames this many seconds apart or more
+# leave nothing to track (a car drives 100 m or more between them): such times
 # are milliseconds or finer, most likely.
 _MAX_FRAME_INTERVAL = 10.0
 
@@ -228,6 +228,8 @@ class SequenceRegistration(BaseEstimator):
         _warn_if_off_scale(getattr(frames[0], "points", frames[0]), self.tau)
         if times is not None:
             _warn_if_not_seconds(np.diff(times))
+        else:
+            _warn_if_period(self.frame_rate)
         if point_times is None and all(getattr(f, "times", None) is not None for f in frames):
             point_times = [f.times for f in frames]
         if point_times is not None and (times is None or len(point_times) != n):
@@ -300,6 +302,8 @@ class SequenceRegistration(BaseEstimator):
         if not hasattr(self, "_run"):
             self._validate_params()
             _warn_if_off_scale(points, self.tau)
+            if time is None:
+                _warn_if_period(self.frame_rate)
             self._reset(processes=query_workers(self.n_jobs))
         elif self._run.n_frames == 1 and time is not None and self._first_time is not None:
             _warn_if_not_seconds([time - self._first_time])
@@ -394,17 +398,31 @@ def _warn_if_off_scale(points, tau):
 
 
 def _warn_if_not_seconds(intervals):
-    """A :class:`~mmreg.estimators.ScaleWarning` where frames come more than
-    ``_MAX_FRAME_INTERVAL`` apart by their times (the median of ``intervals``): the
+    """A :class:`~mmreg.estimators.ScaleWarning` where frames come
+    ``_MAX_FRAME_INTERVAL`` or more apart by their times (the median of ``intervals``): the
     times are milliseconds or finer, most likely, and the velocities and the
     half-second spans would be read in the wrong units."""
     interval = float(np.median(intervals))
-    if interval > _MAX_FRAME_INTERVAL:
+    if interval >= _MAX_FRAME_INTERVAL:
         warn(
             f"the frames' times are {interval:.3g} apart, frame to frame: times are in "
             "seconds, and a log's frames come a fraction of a second apart. Are they "
             "milliseconds (times * 1e-3) or nanoseconds (times * 1e-9)? Velocities "
             "(tracks_) and the half-second spans follow the times.",
+            ScaleWarning,
+        )
+
+
+def _warn_if_period(frame_rate):
+    """A :class:`~mmreg.estimators.ScaleWarning` where ``frame_rate`` puts the frames
+    ``_MAX_FRAME_INTERVAL`` seconds or more apart: the seconds between frames given for
+    the frames per second, most likely (0.1 for a 10 Hz sensor)."""
+    if frame_rate is not None and 1.0 / frame_rate >= _MAX_FRAME_INTERVAL:
+        warn(
+            f"frame_rate={frame_rate:g} puts the frames {1.0 / frame_rate:.3g} s apart: "
+            f"frame_rate is frames per second ({1.0 / frame_rate:.3g} for frames "
+            f"{frame_rate:g} s apart), and velocities (tracks_) and the half-second spans "
+            "follow it.",
             ScaleWarning,
         )
 
