@@ -216,6 +216,13 @@ class SequenceRegistration(BaseEstimator):
         Returns
         -------
         self
+
+        Warns
+        -----
+        ScaleWarning
+            Where ``tau`` does not fit the first frame's points, or the times (or
+            ``frame_rate``) put the frames 10 s or more apart: other units than the
+            points' and seconds, most likely.
         """
         self._validate_params()
         n = len(frames)
@@ -225,7 +232,6 @@ class SequenceRegistration(BaseEstimator):
             times = [f.timestamp for f in frames]
         times = self._check_times(times, n)
         poses = self._check_poses(poses, n)
-        _warn_if_off_scale(getattr(frames[0], "points", frames[0]), self.tau)
         if times is not None:
             _warn_if_not_seconds(np.diff(times))
         else:
@@ -245,8 +251,11 @@ class SequenceRegistration(BaseEstimator):
             results = []
             for k in range(n):
                 frame = frames[k]
+                points = getattr(frame, "points", frame)
+                if k == 0:
+                    _warn_if_off_scale(points, self.tau)
                 results += run.add(
-                    getattr(frame, "points", frame),
+                    points,
                     None if times is None else times[k],
                     None if poses is None else poses[k],
                     None if point_times is None else point_times[k],
