@@ -1,6 +1,7 @@
 """SweepRegistration and the multi-body ICP on generated pairs of sweeps."""
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from hypothesis import strategies as st
 from sklearn.base import clone
 
 from mmreg import MultiModelRegistration, SweepRegistration
+from mmreg.estimators import ScaleWarning
 from mmreg.sweeps._icp import multi_body_icp, rotation_vectors_to_matrices
 
 # Boxes: (centre, size); the first three are the static world, the last two move.
@@ -141,10 +143,22 @@ def test_passthrough_in_any_units_given_tau(scale):
     metres = metres.fit(a, sweep=sweep)
     scaled_params = {k: v * scale if isinstance(v, float) else v for k, v in params.items()}
     scaled = SweepRegistration("passthrough", tau=2.0 * scale, random_state=0, **scaled_params)
-    scaled = scaled.fit(a * scale, sweep=sweep * scale)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScaleWarning)  # tau is in the points' units
+        scaled = scaled.fit(a * scale, sweep=sweep * scale)
     assert scaled.max_displacement_ == pytest.approx(metres.max_displacement_ * scale)
     assert np.mean(scaled.labels_ == metres.labels_) > 0.99
     assert np.abs(scaled.flow_ / scale - metres.flow_).max() < EXACT
+
+
+def test_passthrough_in_other_units_than_tau_warns():
+    # Sweeps sampled every 0.1 m, in millimetres, at the default tau of metres (5): no
+    # multi-model estimator to say so, the pair itself does.
+    a, b, labels, rotations, translations, sweep = make_pair()
+    message = "tau=5 spans fewer than 4 times the median distance between neighbouring points"
+    with pytest.warns(ScaleWarning, match=message) as record:
+        SweepRegistration("passthrough", random_state=0).fit(a * 1e3, sweep=sweep * 1e3)
+    assert record[0].filename == __file__
 
 
 def test_passthrough_needs_two_raw_sweeps():

@@ -92,11 +92,12 @@ def median_spacing(points, random_state=0, neighbours=None):
     return float(np.median(dist[:, 1]))
 
 
-def tau_off_scale(points, tau, neighbours=None):
+def tau_off_scale(points, tau, neighbours=None, spacing=None):
     """How a gate ``tau`` misses the scale of ``points`` (units other than the points'):
     ``("spacing", s)`` where it spans fewer than four of their median nearest-neighbour
-    distances ``s`` (:func:`median_spacing`), ``("diameter", d)`` where it exceeds the
-    diagonal ``d`` of their bounding box; a list of both, one or none.
+    distances ``s`` (:func:`median_spacing`, or ``spacing`` where the caller measured
+    it), ``("diameter", d)`` where it exceeds the diagonal ``d`` of their bounding box; a
+    list of both, one or none.
 
     Examples
     --------
@@ -110,7 +111,8 @@ def tau_off_scale(points, tau, neighbours=None):
     (['spacing'], [])
     """
     problems = []
-    spacing = median_spacing(points, neighbours=neighbours)
+    if spacing is None:
+        spacing = median_spacing(points, neighbours=neighbours)
     if tau < _MIN_GATE_SPACINGS * spacing:
         problems.append(("spacing", spacing))
     # Coincident points (diameter 0) are another problem (a DegenerateInputWarning).

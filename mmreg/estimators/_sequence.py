@@ -444,6 +444,9 @@ class _PairMaker:
     def __init__(self, pair_estimator, tau):
         self.pair_estimator = pair_estimator
         self.tau = tau
+        # The warnings its pairs need not repeat: the log checks the default pairs' tau,
+        # its own, once (a user's pair estimator may have another).
+        self.quiet = (ScaleWarning,) if pair_estimator is None else ()
 
     def __call__(self, seed):
         if self.pair_estimator is None:

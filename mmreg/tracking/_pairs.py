@@ -131,7 +131,11 @@ class PairChain:
         elif "ego_body" in parameters and self.bodiless >= BODILESS_PAIRS:
             # ... and where pairs that would have shown it showed none, there is none.
             kwargs["ego_body"] = (np.zeros(len(first), bool), np.zeros(len(second), bool))
-        pair = estimator.fit(first, sweep=second, **kwargs)
+        with warnings.catch_warnings():
+            # Those the log says once itself (make_pair's ``quiet`` categories).
+            for category in getattr(self.make_pair, "quiet", ()):
+                warnings.simplefilter("ignore", category)
+            pair = estimator.fit(first, sweep=second, **kwargs)
         ego = to_matrix(*pair.ego_motion_)
         self.last_ego = (ego, dt)
         body = _mask(getattr(pair, "ego_body_mask_", None), len(first))
