@@ -123,6 +123,27 @@ def tau_off_scale(points, tau, neighbours=None, spacing=None):
     return problems
 
 
+def warn_if_tau_off_scale(points, tau, of, spacing=None):
+    """A :class:`ScaleWarning` for each way ``tau`` misses the scale of raw sweeps'
+    ``points`` (:func:`tau_off_scale`), which ``of`` names ("the first frame"): every
+    length of their registration is a share of ``tau``, and in other units than the
+    points' it finds nothing moving, however clear the motion."""
+    for problem, length in tau_off_scale(points, tau, spacing=spacing):
+        if problem == "spacing":
+            found = (
+                f"spans fewer than {_MIN_GATE_SPACINGS:g} times the median distance between "
+                f"neighbouring points of {of} ({length:.3g})"
+            )
+        else:
+            found = f"exceeds the diagonal of {of}'s bounding box ({length:.3g})"
+        warn(
+            f"tau={tau:g} {found}: every length of the registration is a share of tau, so "
+            "no motion will be found as it is. tau is in the points' units: 5 for metres "
+            "(500 for centimetres, 5000 for millimetres).",
+            ScaleWarning,
+        )
+
+
 class MultiModelRegistration(BaseRegistration):
     """Multi-model registration by Classification-EM (Jin et al., ICRA 2024).
 

@@ -21,11 +21,7 @@ from sklearn.utils._param_validation import HasMethods, Interval
 from mmreg._array.neighbors import query_workers
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
-from mmreg.estimators._multi_model_registration import (
-    _MIN_GATE_SPACINGS,
-    ScaleWarning,
-    tau_off_scale,
-)
+from mmreg.estimators._multi_model_registration import ScaleWarning, warn_if_tau_off_scale
 from mmreg.tracking._log import LogTracker
 from mmreg.tracking._pair_process import PairsAhead
 
@@ -379,31 +375,16 @@ class SequenceRegistration(BaseEstimator):
 
 
 def _warn_if_off_scale(points, tau):
-    """A :class:`~mmreg.estimators.ScaleWarning` where ``tau`` does not fit a log's first frame
-    (:func:`~mmreg.estimators._multi_model_registration.tau_off_scale`): every length of
-    the pairs and the tracks is a share of it, and a log in centimetres judged in
-    metres finds nothing moving, however clear the motion."""
+    """A :class:`~mmreg.estimators.ScaleWarning` where ``tau`` does not fit a log's first
+    frame (its valid returns; :func:`~mmreg.estimators._multi_model_registration.
+    warn_if_tau_off_scale`)."""
     points = np.asarray(points, dtype=float)
     if points.ndim != 2 or points.shape[1] < 3:
         return  # the frame's own check names the problem
     points = points[:, :3]
     points = points[~invalid_points(points)]
-    if len(points) < 2:
-        return
-    for problem, length in tau_off_scale(points, tau):
-        if problem == "spacing":
-            found = (
-                f"spans fewer than {_MIN_GATE_SPACINGS:g} times the median distance between "
-                f"neighbouring points of the first frame ({length:.3g})"
-            )
-        else:
-            found = f"exceeds the diagonal of the first frame's bounding box ({length:.3g})"
-        warn(
-            f"tau={tau:g} {found}: every length of the pairs and the tracks is a share of "
-            "tau, so the log will show no motion as it is. tau is in the points' units: 5 "
-            "for metres (500 for centimetres, 5000 for millimetres).",
-            ScaleWarning,
-        )
+    if len(points) >= 2:
+        warn_if_tau_off_scale(points, tau, "the first frame")
 
 
 def _warn_if_not_seconds(intervals):

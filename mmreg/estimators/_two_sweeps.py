@@ -35,7 +35,6 @@ from mmreg._validation import (
     invalid_points,
     invalid_rows,
 )
-from mmreg._warnings import warn
 from mmreg.sweeps._cluster_icp import refine_clusters
 from mmreg.sweeps._ground import METRE_TAU
 from mmreg.sweeps._pair import DESKEW_ROUNDS, MIN_SWEEP_POINTS, clusters_of, register_pair
@@ -740,35 +739,16 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
 
     def _warn_if_tau_off_scale(self, state):
         """A ScaleWarning where ``tau`` does not fit the first sweep (``state``, its
-        :class:`~mmreg.sweeps._sweep_state.SweepState`): every length of the pair is a
-        share of it. The spacing is read off the sweep's own tree, on evenly spread
-        points (kept: the pair reads them again)."""
-        from mmreg.estimators._multi_model_registration import (
-            _MIN_GATE_SPACINGS,
-            ScaleWarning,
-            tau_off_scale,
-        )
+        :class:`~mmreg.sweeps._sweep_state.SweepState`). The spacing is read off the
+        sweep's own tree, on evenly spread points (kept: the pair reads them again)."""
+        from mmreg.estimators._multi_model_registration import warn_if_tau_off_scale
 
         n = len(state.points)
         if n < 2:
             return
         rows = np.unique(np.linspace(0, n - 1, min(n, _SPACING_SAMPLE)).astype(np.intp))
         spacing = float(np.median(state.normals.spacing(rows)))
-        tau = self._length_scale()
-        for problem, length in tau_off_scale(state.points, tau, spacing=spacing):
-            if problem == "spacing":
-                found = (
-                    f"spans fewer than {_MIN_GATE_SPACINGS:g} times the median distance "
-                    f"between neighbouring points of the first sweep ({length:.3g})"
-                )
-            else:
-                found = f"exceeds the diagonal of the first sweep's bounding box ({length:.3g})"
-            warn(
-                f"tau={tau:g} {found}: every length of the registration is a share of tau, "
-                "so no motion will be found as it is. tau is in the points' units: 5 for "
-                "metres (500 for centimetres).",
-                ScaleWarning,
-            )
+        warn_if_tau_off_scale(state.points, self._length_scale(), "the first sweep", spacing)
 
     def _fit_raw(self, a, sweep, timing, ground, known, body, states):
         """Two raw sweeps (valid rows): :func:`mmreg.sweeps._pair.register_pair` over
