@@ -6,6 +6,7 @@ from mmreg.estimators._base import BaseRegistration, DegenerateInputWarning
 from mmreg.estimators._multi_model_registration import MultiModelRegistration, ScaleWarning
 from mmreg.estimators._sequence import SequenceRegistration
 from mmreg.estimators._two_sweeps import SweepRegistration
+from mmreg.sweeps._sensor_frame import SensorFrameWarning
 
 __all__ = [
     "BaseRegistration",
@@ -14,6 +15,7 @@ __all__ = [
     "MultiModelRegistration",
     "RobustEMResult",
     "ScaleWarning",
+    "SensorFrameWarning",
     "SequenceRegistration",
     "SweepRegistration",
     "multi_model_em",

@@ -22,6 +22,7 @@ from mmreg._array.neighbors import query_workers
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
 from mmreg.estimators._multi_model_registration import ScaleWarning, warn_if_tau_off_scale
+from mmreg.sweeps._sensor_frame import SensorFrameWarning, warn_if_not_sensor_frame
 from mmreg.tracking._log import LogTracker
 from mmreg.tracking._pair_process import PairsAhead
 
@@ -245,11 +246,13 @@ class SequenceRegistration(BaseEstimator):
         del self._run  # a later partial_fit starts a log of its own
         try:
             results = []
+            told = set()  # what the frames' sensor frame warned of (once a log)
             for k in range(n):
                 frame = frames[k]
                 points = getattr(frame, "points", frame)
                 if k == 0:
                     _warn_if_off_scale(points, self.tau)
+                told |= _warn_if_not_sensor_frame(points, k, told)
                 results += run.add(
                     points,
                     None if times is None else times[k],
@@ -307,6 +310,7 @@ class SequenceRegistration(BaseEstimator):
         if not hasattr(self, "_run"):
             self._validate_params()
             _warn_if_off_scale(points, self.tau)
+            self._sensor_frame_told = set()
             if time is None:
                 _warn_if_period(self.frame_rate)
             self._reset(processes=query_workers(self.n_jobs))
@@ -316,6 +320,9 @@ class SequenceRegistration(BaseEstimator):
             pose = self._check_poses(np.asarray(pose, dtype=float)[None], 1)[0]
         if point_times is not None and time is None:
             raise ValueError("point_times goes with time: the frame's time in seconds.")
+        self._sensor_frame_told |= _warn_if_not_sensor_frame(
+            points, self._run.n_frames, self._sensor_frame_told
+        )
         if self._run.n_frames == 0:
             self._first_time = time
         self.finished_ = self._run.add(points, time, pose, point_times)
@@ -387,6 +394,20 @@ def _warn_if_off_scale(points, tau):
         warn_if_tau_off_scale(points, tau, "the first frame")
 
 
+def _warn_if_not_sensor_frame(points, index, told):
+    """A :class:`~mmreg.estimators.SensorFrameWarning` where frame ``index`` (its valid
+    returns) is not in its sensor's frame, of a kind not yet ``told``; the kinds it
+    warned of. Whether z is up is asked of the first frame; where the sensor is, of every
+    frame (a log in a world frame leaves the origin as it drives)."""
+    wanted = {"away"} if index else {"away", "up"}
+    wanted -= told
+    points = np.asarray(points, dtype=float) if wanted else None
+    if not wanted or points.ndim != 2 or points.shape[1] < 3:
+        return set()
+    points = points[:, :3]
+    return warn_if_not_sensor_frame(points[~invalid_points(points)], f"frame {index}", wanted)
+
+
 def _warn_if_not_seconds(intervals):
     """A :class:`~mmreg.estimators.ScaleWarning` where frames come
     ``_MAX_FRAME_INTERVAL`` or more apart by their times (the median of ``intervals``): the
@@ -425,9 +446,11 @@ class _PairMaker:
     def __init__(self, pair_estimator, tau):
         self.pair_estimator = pair_estimator
         self.tau = tau
-        # The warnings its pairs need not repeat: the log checks the default pairs' tau,
-        # its own, once (a user's pair estimator may have another).
-        self.quiet = (ScaleWarning,) if pair_estimator is None else ()
+        # The warnings its pairs need not repeat: the log checks its frames' sensor frame
+        # and the default pairs' tau, its own, once.
+        self.quiet = (ScaleWarning, SensorFrameWarning)
+        if pair_estimator is not None:  # it may have another tau
+            self.quiet = (SensorFrameWarning,)
 
     def __call__(self, seed):
         if self.pair_estimator is None:

@@ -38,6 +38,7 @@ from mmreg._validation import (
 from mmreg.sweeps._cluster_icp import refine_clusters
 from mmreg.sweeps._ground import METRE_TAU
 from mmreg.sweeps._pair import DESKEW_ROUNDS, MIN_SWEEP_POINTS, clusters_of, register_pair
+from mmreg.sweeps._sensor_frame import warn_if_not_sensor_frame
 from mmreg.sweeps._settings import PairSettings
 from mmreg.sweeps._sweep_state import SweepState
 
@@ -527,6 +528,16 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         Returns
         -------
         self : SweepRegistration
+
+        Warns
+        -----
+        ScaleWarning
+            Where ``tau`` does not fit the points (the multi-model estimator's check;
+            with ``"passthrough"``, the first sweep's): other units than the points'.
+        SensorFrameWarning
+            Raw mode: where the first sweep does not look like a LiDAR sweep in its
+            sensor's frame: the origin far outside it (a map's or world frame), or
+            another axis than z up.
         """
         X = validate_data(
             self, X, dtype=np.float64, ensure_min_samples=3, ensure_all_finite="allow-nan"
@@ -765,6 +776,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             _check_states(states, a, sweep)
         if self.estimator == "passthrough":  # no multi-model estimator to check tau
             self._warn_if_tau_off_scale(states[0])
+        warn_if_not_sensor_frame(a, "the first sweep")
         result = register_pair(
             *states,
             settings,

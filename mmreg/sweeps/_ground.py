@@ -29,7 +29,7 @@ METRE_TAU = 5.0
 # A z-up sweep spreads far wider than it is tall: its 5-95 % height range is below this
 # share of its widest horizontal range (Argoverse 2 and KITTI sweeps: 0.02-0.1; a camera
 # frame, z forward: about 1).
-_FLAT_SHARE = 0.25
+FLAT_SHARE = 0.25
 # A sweep whose ground was removed before still has low points that Patchwork++ takes for
 # patches of ground (2.3-2.6 % of the points of ground-removed Argoverse 2 sweeps, the
 # bottoms of cars among them); a sweep with its ground holds several times more (13-15 %
@@ -89,7 +89,7 @@ def is_z_up_sweep(points):
     """
     low, high = np.percentile(points, [5, 95], axis=0)
     spread = high - low
-    return bool(spread[2] < _FLAT_SHARE * max(spread[0], spread[1]))
+    return bool(spread[2] < FLAT_SHARE * max(spread[0], spread[1]))
 
 
 def _patchwork():
