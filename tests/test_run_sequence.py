@@ -373,3 +373,22 @@ def test_a_log_in_other_units_than_tau_is_told_so_without_verbose(tmp_path, caps
     # Each pair alone: the multi-model estimator's own warning, shown as well.
     assert main([*command, "--out", str(tmp_path / "pairs"), "--pairs"]) == 0
     assert ": warning: tau=5 spans fewer than 4 times" in capsys.readouterr().out
+
+
+def test_a_log_not_in_its_sensor_frame_is_told_so_without_verbose(tmp_path, capsys):
+    """Frames in a map's coordinates (UTM): the run says so on the console, -v or not,
+    for the log and for each pair alone."""
+    from mmreg.cli import main
+    from mmreg.datasets import make_lidar_sequence
+
+    log = make_lidar_sequence(3, frame_rate=10.0, n_azimuths=256, random_state=0)
+    folder = tmp_path / "utm"
+    folder.mkdir()
+    for k, points in enumerate(log.frames):
+        np.save(folder / f"scan{k}.npy", points + [5e5, 4e6, 30.0])
+    command = ["run", str(folder), "--frame-rate", "10"]
+    assert main([*command, "--out", str(tmp_path / "log")]) == 0
+    said = capsys.readouterr().out
+    assert "utm: warning: the origin lies 4.03e+06 from frame 0" in said
+    assert main([*command, "--out", str(tmp_path / "pairs"), "--pairs"]) == 0
+    assert "warning: the origin lies 4.03e+06 from the first sweep" in capsys.readouterr().out

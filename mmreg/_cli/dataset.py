@@ -743,9 +743,9 @@ def print_jobs(summary, *, verbose=False):
 
 def print_warnings(names, summary, *, verbose=False):
     """Each warning once, with the jobs (or logs) that gave it: every one with
-    ``verbose``, else those that say the units are wrong (the results are, as they
-    stand)."""
-    column = "warnings" if verbose else "units_warnings"
+    ``verbose``, else those that say the input is not in the points' units or their
+    sensor's frame (the results are wrong, as they stand)."""
+    column = "warnings" if verbose else "input_warnings"
     if column in summary:
         _print_warnings(names, summary[column])
 

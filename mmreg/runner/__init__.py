@@ -1022,7 +1022,8 @@ def run_dataset(
         from the ego vehicle's own body), ``n_no_return`` (rows of the first sweep that
         hold no return, left out), ``n_iter``, ``converged``, ``load_s``, ``fit_s`` (seconds, on the
         worker), ``resumed`` (read from an earlier run), ``error``, ``warnings``
-        (``units_warnings``: those that say the units are wrong), and with
+        (``input_warnings``: those that say the input is not in the points' units or
+        their sensor's frame), and with
         the truth ``iou``, ``objects_found``, ``moving_objects``, ``moving_found``
         (objects besides the largest found with IoU >= 0.5), ``epe3d``, ``acc3ds``,
         ``acc3dr``, ``outliers3d`` (of the rigid flow, :func:`mmreg.metrics.

@@ -976,13 +976,15 @@ def check_jobs(jobs):
 
 def warning_columns(caught):
     """The warnings ``caught`` as a job's or a log's row keeps them: ``warnings``, each
-    message once, and ``units_warnings``, those that say a length or the times are not
-    in the points' units (:class:`~mmreg.estimators.ScaleWarning`). The command line
-    shows those without ``-v``: the result is wrong as it stands."""
-    from mmreg.estimators import ScaleWarning
+    message once, and ``input_warnings``, those that say the input is not what the
+    registration reads: a length or the times not in the points' units
+    (:class:`~mmreg.estimators.ScaleWarning`), points not in their sensor's frame
+    (:class:`~mmreg.estimators.SensorFrameWarning`). The command line shows those
+    without ``-v``: the result is wrong as it stands."""
+    from mmreg.estimators import ScaleWarning, SensorFrameWarning
 
     def joined(found):
         return " | ".join(sorted({str(w.message) for w in found}))[:500]
 
-    units = [w for w in caught if issubclass(w.category, ScaleWarning)]
-    return {"warnings": joined(caught), "units_warnings": joined(units)}
+    wrong = [w for w in caught if issubclass(w.category, (ScaleWarning, SensorFrameWarning))]
+    return {"warnings": joined(caught), "input_warnings": joined(wrong)}

@@ -833,7 +833,8 @@ def run_logs(
         ``moving_objects_per_frame``, ``max_moving_objects``, ``s_per_frame`` (the fit's
         seconds per frame), ``points_per_frame``, ``load_s``, ``fit_s``,
         ``velocity_unit``, ``poses_given``, ``resumed``, ``error``, ``warnings``,
-        ``units_warnings`` (those that say the units are wrong), ``changed_input`` (a log
+        ``input_warnings`` (those that say the input is not in the points' units or
+        their sensor's frame), ``changed_input`` (a log
         run again because that file changed), ``picture_error``;
         ``summary.attrs["plan"]``: where the logs ran, as :func:`run_dataset`'s.
 
@@ -947,7 +948,7 @@ def run_logs(
     frame = pd.DataFrame([rows[job.name] for job in jobs])
     columns = SUMMARY_COLUMNS + [c for c in frame.columns if c not in SUMMARY_COLUMNS]
     frame = frame.reindex(columns=columns)
-    for column in ("error", "changed_input", "warnings", "units_warnings", "picture_error"):
+    for column in ("error", "changed_input", "warnings", "input_warnings", "picture_error"):
         if column in frame:
             frame[column] = frame[column].astype(object).where(frame[column].notna(), "")
     if any(getattr(job, "folder", "") for job in jobs):
