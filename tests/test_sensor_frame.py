@@ -110,3 +110,29 @@ def test_a_log_with_y_up_warns_once_and_one_in_its_sensor_frame_does_not(log):
     with warnings.catch_warnings():
         warnings.simplefilter("error", SensorFrameWarning)
         SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+
+
+def test_a_sensor_mounted_upside_down_is_told_where_the_ground_says_so(log):
+    sweep = log.frames[0]
+    upside_down = sweep * [1.0, -1.0, -1.0]  # a turn about x
+    assert sensor_frame_problems(sweep, tau=5.0) == []
+    assert sensor_frame_problems(upside_down, tau=5.0) == [("down",)]
+    assert sensor_frame_problems(upside_down) == []  # without tau, not asked
+    # With its ground removed, a sweep holds none either way: no word.
+    no_ground = sweep[~np.asarray(log.ground[0], dtype=bool)]
+    assert sensor_frame_problems(no_ground * [1.0, -1.0, -1.0], tau=5.0) == []
+    # In centimetres, at tau=500, the same.
+    assert sensor_frame_problems(upside_down * 100.0, tau=500.0) == [("down",)]
+
+
+def test_pairs_and_logs_upside_down_warn_once(log):
+    frames = [frame * [1.0, -1.0, -1.0] for frame in log.frames]
+    with pytest.warns(SensorFrameWarning, match="mounted upside down") as record:
+        SweepRegistration(random_state=0).fit(frames[0], sweep=frames[1], interval=0.1)
+    assert {w.filename for w in record if w.category is SensorFrameWarning} == {__file__}
+    with warnings.catch_warnings():  # the ground kept: not asked
+        warnings.simplefilter("error", SensorFrameWarning)
+        SweepRegistration(ground="keep", random_state=0).fit(frames[0], sweep=frames[1])
+    with pytest.warns(SensorFrameWarning, match="frame 0 holds no ground") as record:
+        SequenceRegistration(random_state=0).fit(frames, times=log.times)
+    assert len([w for w in record if w.category is SensorFrameWarning]) == 1
