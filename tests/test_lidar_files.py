@@ -133,6 +133,22 @@ def test_malformed_sweep_files_are_one_error(tmp_path, name, content, message):
         mmio.read_point_cloud(tmp_path / name)
 
 
+def test_flat_files_of_another_layout_are_one_error(tmp_path):
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-40, 40, (400, 3))  # 400: a whole number of 16-byte points either way
+    points.astype("<f8").tofile(tmp_path / "doubles.bin")  # float64 x y z
+    with pytest.raises(ValueError, match=r"lie 1e\+09 or more .* \(float64 values\?\)"):
+        mmio.read_point_cloud(tmp_path / "doubles.bin")
+    points.astype("<f4").tofile(tmp_path / "three.bin")  # float32 x y z, no reflectance
+    with pytest.raises(ValueError, match=r"reflectance\) is negative: .*\(x y z alone"):
+        mmio.read_point_cloud(tmp_path / "three.bin")
+    # A few stray rows (a bad return, a negative reflectance) are the sensor's, kept.
+    reflectance = rng.uniform(0, 1, 400)
+    reflectance[:8] = -1.0
+    write_kitti(tmp_path / "strays.bin", points, reflectance=reflectance)
+    np.testing.assert_allclose(mmio.read_point_cloud(tmp_path / "strays.bin"), points, rtol=1e-6)
+
+
 def test_feather_without_z_names_the_columns(tmp_path):
     pd.DataFrame({"x": [1.0], "y": [2.0], "intensity": [3]}).to_feather(tmp_path / "a.feather")
     with pytest.raises(ValueError, match=r"missing column\(s\) z .* it has x, y, intensity"):

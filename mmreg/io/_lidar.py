@@ -32,6 +32,10 @@ _FLAT_FORMATS = {
     "kitti": (4, "KITTI velodyne .bin", "float32 x y z reflectance"),
     "nuscenes": (5, "nuScenes .pcd.bin", "float32 x y z intensity ring"),
 }
+# Coordinates this large are no LiDAR return in any units (1,000 km in millimetres).
+_WILD = 1e9
+# Rows of a flat file that may be strays before its values are refused as another layout.
+_STRAY_SHARE = 0.1
 ROS_INSTALL = 'pip install "mmreg[ros]"'
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -108,7 +112,31 @@ def _read_flat(path, kind):
     if not data:
         raise ValueError(f"{path}: holds no points (0 bytes).")
     values = np.frombuffer(data, dtype="<f4").reshape(-1, width)
+    _check_flat_values(values, path, name, layout)
     return values[:, :3].astype(np.float64), None, values[:, 3].astype(np.float64)
+
+
+def _check_flat_values(values, path, name, layout):
+    """One clear error where the floats are not ``layout``, though their bytes fit it:
+    float64 values read as float32 pairs (coordinates of 1e9 and more, in any units), or
+    points of three floats read as four (their coordinates in the reflectance, which is
+    never negative). A share of stray rows (NaN padding, a bad return) passes."""
+    coordinates = values[:, :3]
+    wild = np.isinf(coordinates).any(axis=1) | (np.abs(coordinates) >= _WILD).any(axis=1)
+    if wild.mean() > _STRAY_SHARE:
+        example = coordinates[np.flatnonzero(wild)[0]]
+        raise ValueError(
+            f"{path}: {wild.mean():.0%} of its points lie {_WILD:g} or more from the sensor "
+            f"(e.g. {np.array2string(example, precision=3)}): not {layout} (float64 "
+            f"values?), or not a {name} file."
+        )
+    negative = values[:, 3] < 0
+    if negative.mean() > _STRAY_SHARE:
+        raise ValueError(
+            f"{path}: the 4th float of {negative.mean():.0%} of its points (the "
+            f"reflectance) is negative: not {layout} (x y z alone, 12 bytes a point? "
+            f"np.fromfile(path, '<f4').reshape(-1, 3) reads those), or not a {name} file."
+        )
 
 
 def _read_feather_sweep(path):
