@@ -136,3 +136,23 @@ def test_pairs_and_logs_upside_down_warn_once(log):
     with pytest.warns(SensorFrameWarning, match="frame 0 holds no ground") as record:
         SequenceRegistration(random_state=0).fit(frames, times=log.times)
     assert len([w for w in record if w.category is SensorFrameWarning]) == 1
+
+
+def test_z_down_is_asked_only_where_the_ground_can_tell(log, monkeypatch):
+    from mmreg.sweeps import _sensor_frame
+
+    frames = [frame * [1.0, -1.0, -1.0] for frame in log.frames[:2]]
+    masks = [np.asarray(g, dtype=bool) for g in log.ground[:2]]
+
+    def no_segmentation(*args, **kwargs):
+        raise ImportError("no pypatchworkpp here")
+
+    monkeypatch.setattr(_sensor_frame, "ground_mask", no_segmentation)
+    assert sensor_frame_problems(frames[0], tau=5.0) == []  # cannot tell: no word
+    # The ground given: the pair segments none, nor does its check.
+    monkeypatch.setattr(_sensor_frame, "ground_mask", lambda *a, **k: pytest.fail("segmented"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SensorFrameWarning)
+        SweepRegistration(random_state=0).fit(
+            frames[0], sweep=frames[1], ground=masks[0], sweep_ground=masks[1]
+        )

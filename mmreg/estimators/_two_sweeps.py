@@ -748,12 +748,12 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
         return self
 
-    def _warn_if_not_sensor_frame(self, state):
+    def _warn_if_not_sensor_frame(self, state, segmented):
         """A SensorFrameWarning where the first sweep (``state``) is not in its sensor's
-        frame; whether z points down is asked where the ground is segmented (its
-        segmentation is kept: the pair reads it again)."""
+        frame; whether z points down is asked where the pair segments the ground
+        (``segmented``: its segmentation is kept, the pair reads it again)."""
         kinds, tau, holds = ("away", "up"), None, None
-        if self.ground == "auto":
+        if segmented:
             tau = self._length_scale()
             kinds, holds = ("away", "up", "down"), state.holds_ground(tau)
         warn_if_not_sensor_frame(state.points, "the first sweep", kinds, tau, holds)
@@ -786,7 +786,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             _check_states(states, a, sweep)
         if self.estimator == "passthrough":  # no multi-model estimator to check tau
             self._warn_if_tau_off_scale(states[0])
-        self._warn_if_not_sensor_frame(states[0])
+        self._warn_if_not_sensor_frame(states[0], self.ground == "auto" and ground is None)
         result = register_pair(
             *states,
             settings,

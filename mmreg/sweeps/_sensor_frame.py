@@ -106,12 +106,13 @@ def _upside_down(points, tau, holds_ground=None):
     with z reversed (``holds_ground``: the first, where known)."""
     if not is_z_up_sweep(points):
         return False
-    if holds_ground is None:
-        holds_ground = has_ground(points, ground_mask(points, tau))
-    if holds_ground:
-        return False
     flipped = points * [1.0, -1.0, -1.0]  # a turn about x: still a right-handed frame
-    return has_ground(flipped, ground_mask(flipped, tau))
+    try:
+        if holds_ground is None:
+            holds_ground = has_ground(points, ground_mask(points, tau))
+        return not holds_ground and has_ground(flipped, ground_mask(flipped, tau))
+    except ImportError:  # no Patchwork++ on this platform: the ground cannot tell
+        return False
 
 
 def warn_if_not_sensor_frame(points, of, problems=("away", "up"), tau=None, holds_ground=None):
