@@ -322,6 +322,11 @@ def test_the_fitted_log(street):
     [
         ([np.zeros((5, 3))], {}, "at least 2 frames"),
         ([np.ones((5, 3))] * 2, {"times": [1.0, 1.0]}, "times must increase"),
+        (
+            [np.ones((5, 3))] * 2,  # epoch seconds 0.1 apart, in float32 (128 s steps)
+            {"times": np.array([1.7e9, 1.7e9 + 0.1], dtype=np.float32)},
+            r"float32, which holds times of 1\.7e\+09 only to 128 s",
+        ),
         ([np.ones((5, 3))] * 2, {"times": [1.0]}, "one per frame"),
         ([np.ones((5, 3))] * 2, {"poses": np.eye(4)}, r"poses must have shape \(2, 4, 4\)"),
         ([np.ones(5)] * 2, {}, r"shape \(n, 3\)"),

@@ -360,11 +360,22 @@ class SequenceRegistration(BaseEstimator):
     def _check_times(self, times, n):
         if times is None:
             return None
-        times = np.asarray(times, dtype=float)
+        given = np.asarray(times)
+        times = given.astype(float)
         if times.shape != (n,) or not np.all(np.isfinite(times)):
             raise ValueError(f"times must be {n} finite numbers, one per frame.")
         if np.any(np.diff(times) <= 0):
-            raise ValueError("times must increase from frame to frame.")
+            lost = ""
+            if given.dtype == np.float32 and np.any(np.diff(times) == 0):
+                # Epoch seconds (1.7e9) in float32 keep 128 s steps: every frame's time
+                # rounds to the same few values.
+                step = float(np.spacing(np.float32(np.max(np.abs(times)))))
+                lost = (
+                    f" They are float32, which holds times of {np.max(np.abs(times)):.3g} "
+                    f"only to {step:g} s: pass them as float64 (or seconds from the log's "
+                    "start)."
+                )
+            raise ValueError("times must increase from frame to frame." + lost)
         return times
 
     def _check_poses(self, poses, n):
