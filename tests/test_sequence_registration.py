@@ -329,6 +329,11 @@ def test_the_fitted_log(street):
         ),
         ([np.ones((5, 3))] * 2, {"times": [1.0]}, "one per frame"),
         ([np.ones((5, 3))] * 2, {"poses": np.eye(4)}, r"poses must have shape \(2, 4, 4\)"),
+        (
+            [np.ones((5, 3))] * 2,  # a scaled pose (a map's units, a similarity)
+            {"poses": np.stack([np.eye(4), np.diag([2.0, 2.0, 2.0, 1.0])])},
+            r"poses\[1\] is not a rigid motion",
+        ),
         ([np.ones(5)] * 2, {}, r"shape \(n, 3\)"),
     ],
 )

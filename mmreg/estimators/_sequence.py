@@ -42,6 +42,8 @@ _MIN_ISLAND_SIZE = 12
 # leave nothing to track (a car drives 100 m or more between them): such times
 # are milliseconds or finer, most likely.
 _MAX_FRAME_INTERVAL = 10.0
+# A given pose's rotation is one within this (as a pair's ego_motion start must be).
+_ROTATION_TOLERANCE = 1e-4
 
 
 class SequenceRegistration(BaseEstimator):
@@ -384,6 +386,22 @@ class SequenceRegistration(BaseEstimator):
         poses = np.asarray(poses, dtype=float)
         if poses.shape != (n, 4, 4) or not np.all(np.isfinite(poses)):
             raise ValueError(f"poses must have shape ({n}, 4, 4) and be finite.")
+        # A pose is rigid: a rotation (to the pairs' tolerance) and a last row 0 0 0 1.
+        rotations = poses[:, :3, :3]
+        gram = np.einsum("kji,kjl->kil", rotations, rotations)
+        rigid = (
+            np.all(np.abs(gram - np.eye(3)) <= _ROTATION_TOLERANCE, axis=(1, 2))
+            & (np.linalg.det(rotations) > 0)
+            & np.all(np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]) <= _ROTATION_TOLERANCE, axis=1)
+        )
+        if not rigid.all():
+            k = int(np.flatnonzero(~rigid)[0])
+            raise ValueError(
+                f"poses[{k}] is not a rigid motion (a rotation, R^T R = I and det R = 1 "
+                f"within {_ROTATION_TOLERANCE:g}, and a last row 0 0 0 1); got "
+                f"{np.array2string(poses[k], precision=4, separator=', ')}. poses are the "
+                "sensor's poses, world from sensor, as 4 x 4 matrices."
+            )
         return poses
 
     def _min_points(self):
