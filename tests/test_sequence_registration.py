@@ -267,6 +267,18 @@ def test_tracks_move_level_on_level_ground():
     assert np.all(tracks.vz.abs() <= 0.05 * np.maximum(tracks.speed, 1.0))
 
 
+def test_online_times_given_for_some_frames_only_are_one_clear_error(two_frames):
+    frames, times = two_frames.frames, two_frames.times
+    online = SequenceRegistration(random_state=0)
+    online.partial_fit(frames[0], time=times[0])
+    with pytest.raises(ValueError, match="frame 1 has no time and frame 0 had one"):
+        online.partial_fit(frames[1])
+    untimed = SequenceRegistration(random_state=0)
+    untimed.partial_fit(frames[0])
+    with pytest.raises(ValueError, match="frame 1 has a time and frame 0 had none"):
+        untimed.partial_fit(frames[1], time=times[1])
+
+
 def test_online_equals_batch(street):
     log, batch = street
     online = SequenceRegistration(random_state=0)

@@ -320,7 +320,13 @@ class SequenceRegistration(BaseEstimator):
             if time is None:
                 _warn_if_period(self.frame_rate)
             self._reset(processes=query_workers(self.n_jobs))
-        elif self._run.n_frames == 1 and time is not None and self._first_time is not None:
+        elif self._run.n_frames and (time is None) != (self._first_time is None):
+            raise ValueError(
+                f"frame {self._run.n_frames} has {'no time' if time is None else 'a time'} "
+                f"and frame 0 {'had one' if time is None else 'had none'}: give every "
+                "frame of a log its time, or none (frame_rate then times them)."
+            )
+        elif self._run.n_frames == 1 and time is not None:
             _warn_if_not_seconds([time - self._first_time])
         if pose is not None:
             pose = self._check_poses(np.asarray(pose, dtype=float)[None], 1)[0]
