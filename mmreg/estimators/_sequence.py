@@ -225,7 +225,7 @@ class SequenceRegistration(BaseEstimator):
         SensorFrameWarning
             Where a frame is not in its sensor's frame: the origin far outside it (a
             map's or world frame; asked of every frame), or the first frame with
-            another axis up, or z down. Once a log.
+            another axis than z up. Once a log.
         """
         self._validate_params()
         n = len(frames)
@@ -258,7 +258,7 @@ class SequenceRegistration(BaseEstimator):
                 points = getattr(frame, "points", frame)
                 if k == 0:
                     _warn_if_off_scale(points, self.tau)
-                told |= _warn_if_not_sensor_frame(points, k, told, self.tau)
+                told |= _warn_if_not_sensor_frame(points, k, told)
                 results += run.add(
                     points,
                     None if times is None else times[k],
@@ -333,7 +333,7 @@ class SequenceRegistration(BaseEstimator):
         if point_times is not None and time is None:
             raise ValueError("point_times goes with time: the frame's time in seconds.")
         self._sensor_frame_told |= _warn_if_not_sensor_frame(
-            points, self._run.n_frames, self._sensor_frame_told, self.tau
+            points, self._run.n_frames, self._sensor_frame_told
         )
         if self._run.n_frames == 0:
             self._first_time = time
@@ -433,20 +433,18 @@ def _warn_if_off_scale(points, tau):
         warn_if_tau_off_scale(points, tau, "the first frame")
 
 
-def _warn_if_not_sensor_frame(points, index, told, tau):
+def _warn_if_not_sensor_frame(points, index, told):
     """A :class:`~mmreg.estimators.SensorFrameWarning` where frame ``index`` (its valid
     returns) is not in its sensor's frame, of a kind not yet ``told``; the kinds it
-    warned of. Whether z is up (at ``tau``, the log's length) is asked of the first
-    frame; where the sensor is, of every frame (a log in a world frame leaves the origin
-    as it drives)."""
-    wanted = {"away"} if index else {"away", "up", "down"}
+    warned of. Whether z is up is asked of the first frame; where the sensor is, of every
+    frame (a log in a world frame leaves the origin as it drives)."""
+    wanted = {"away"} if index else {"away", "up"}
     wanted -= told
     points = np.asarray(points, dtype=float) if wanted else None
     if not wanted or points.ndim != 2 or points.shape[1] < 3:
         return set()
     points = points[:, :3]
-    points = points[~invalid_points(points)]
-    return warn_if_not_sensor_frame(points, f"frame {index}", wanted, tau)
+    return warn_if_not_sensor_frame(points[~invalid_points(points)], f"frame {index}", wanted)
 
 
 def _warn_if_not_seconds(intervals):

@@ -536,8 +536,8 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             with ``"passthrough"``, the first sweep's): other units than the points'.
         SensorFrameWarning
             Raw mode: where the first sweep does not look like a LiDAR sweep in its
-            sensor's frame: the origin far outside it (a map's or world frame), another
-            axis than z up, or (with ``ground="auto"``) z down.
+            sensor's frame: the origin far outside it (a map's or world frame), or
+            another axis than z up.
         """
         X = validate_data(
             self, X, dtype=np.float64, ensure_min_samples=3, ensure_all_finite="allow-nan"
@@ -748,16 +748,6 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
         self.moving_ = self._moving(a, a + self.flow_, labels, rotations, translations, static)
         return self
 
-    def _warn_if_not_sensor_frame(self, state, segmented):
-        """A SensorFrameWarning where the first sweep (``state``) is not in its sensor's
-        frame; whether z points down is asked where the pair segments the ground
-        (``segmented``: its segmentation is kept, the pair reads it again)."""
-        kinds, tau, holds = ("away", "up"), None, None
-        if segmented:
-            tau = self._length_scale()
-            kinds, holds = ("away", "up", "down"), state.holds_ground(tau)
-        warn_if_not_sensor_frame(state.points, "the first sweep", kinds, tau, holds)
-
     def _warn_if_tau_off_scale(self, state):
         """A ScaleWarning where ``tau`` does not fit the first sweep (``state``, its
         :class:`~mmreg.sweeps._sweep_state.SweepState`). The spacing is read off the
@@ -786,7 +776,7 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             _check_states(states, a, sweep)
         if self.estimator == "passthrough":  # no multi-model estimator to check tau
             self._warn_if_tau_off_scale(states[0])
-        self._warn_if_not_sensor_frame(states[0], self.ground == "auto" and ground is None)
+        warn_if_not_sensor_frame(a, "the first sweep")
         result = register_pair(
             *states,
             settings,

@@ -16,18 +16,13 @@ tells both from what the points show alone:
 * another axis up: a LiDAR sweep spreads along the ground far more than it rises
   (:func:`mmreg.sweeps._ground.is_z_up_sweep`); one whose x or y spans under a quarter of
   the other two axes' widest span, where z does not, lies flat across them, with that
-  axis vertical;
-* z down (a sensor mounted upside down, with ``tau``): a sweep flat across x and y that
-  holds no ground below its sensor (:func:`mmreg.sweeps._ground.has_ground`), and would
-  with z reversed. Every shared sweep and log holds its ground as it is and none with z
-  reversed; one whose ground was removed holds none either way (no warning). A generated
-  log turned upside down found IoU 0.11 of its moving points, without a word.
+  axis vertical.
 """
 
 import numpy as np
 
 from mmreg._warnings import warn
-from mmreg.sweeps._ground import FLAT_SHARE, ground_mask, has_ground, is_z_up_sweep
+from mmreg.sweeps._ground import FLAT_SHARE
 
 __all__ = ["SensorFrameWarning", "sensor_frame_problems", "warn_if_not_sensor_frame"]
 
@@ -43,12 +38,8 @@ class SensorFrameWarning(UserWarning):
     sensor at the origin): every raw stage reads them so."""
 
 
-def sensor_frame_problems(points, tau=None, holds_ground=None):
+def sensor_frame_problems(points):
     """How raw ``points`` (valid returns, ``(n, 3)``) miss their sensor's frame.
-
-    ``tau`` (the registration's length, in the points' units) asks whether z points
-    down too, which segments the ground (Patchwork++); ``holds_ground``: whether the
-    points hold a ground as they are, where the caller knows it.
 
     Returns
     -------
@@ -56,8 +47,8 @@ def sensor_frame_problems(points, tau=None, holds_ground=None):
         ``("away", gap, extent)`` where the origin lies ``gap`` from the bulk of the
         points (their 5-95 % box), more than the box's diagonal ``extent``;
         ``("up", axis)`` where they lie flat across the other two axes, ``axis``
-        (``"x"`` or ``"y"``) vertical; ``("down",)`` where z points down. Empty where
-        they look like a sweep in its sensor's frame, or are too few (under 10) to tell.
+        (``"x"`` or ``"y"``) vertical. Empty where they look like a sweep in its
+        sensor's frame, or are too few (under 10) to tell.
 
     Examples
     --------
@@ -78,7 +69,6 @@ def sensor_frame_problems(points, tau=None, holds_ground=None):
     points = np.asarray(points, dtype=float)
     if len(points) < 10:
         return []
-    whole = points
     if len(points) > _SAMPLE:
         points = points[np.linspace(0, len(points) - 1, _SAMPLE).astype(np.intp)]
     low, high = np.percentile(points, _BULK, axis=0)
@@ -96,32 +86,14 @@ def sensor_frame_problems(points, tau=None, holds_ground=None):
     ]
     if flat:
         problems.append(("up", "xy"[min(flat, key=lambda axis: spread[axis])]))
-    if tau is not None and _upside_down(whole, tau, holds_ground):
-        problems.append(("down",))
     return problems
 
 
-def _upside_down(points, tau, holds_ground=None):
-    """Whether a sweep flat across x and y holds no ground below its sensor and would
-    with z reversed (``holds_ground``: the first, where known)."""
-    if not is_z_up_sweep(points):
-        return False
-    flipped = points * [1.0, -1.0, -1.0]  # a turn about x: still a right-handed frame
-    try:
-        if holds_ground is None:
-            holds_ground = has_ground(points, ground_mask(points, tau))
-        return not holds_ground and has_ground(flipped, ground_mask(flipped, tau))
-    except ImportError:  # no Patchwork++ on this platform: the ground cannot tell
-        return False
-
-
-def warn_if_not_sensor_frame(points, of, problems=("away", "up"), tau=None, holds_ground=None):
+def warn_if_not_sensor_frame(points, of, problems=("away", "up")):
     """A :class:`SensorFrameWarning` for each way raw ``points`` miss their sensor's
-    frame (:func:`sensor_frame_problems`, of the kinds in ``problems``; ``"down"`` needs
-    ``tau``), which ``of`` names ("the first sweep"); the kinds found (a set)."""
-    if "down" not in problems:
-        tau = None
-    found = [p for p in sensor_frame_problems(points, tau, holds_ground) if p[0] in problems]
+    frame (:func:`sensor_frame_problems`, of the kinds in ``problems``), which ``of``
+    names ("the first sweep"); the kinds found (a set)."""
+    found = [p for p in sensor_frame_problems(points) if p[0] in problems]
     for problem in found:
         if problem[0] == "away":
             _, gap, extent = problem
@@ -131,13 +103,6 @@ def warn_if_not_sensor_frame(points, of, problems=("away", "up"), tau=None, hold
                 "a world frame?). Raw sweeps are read as the sensor gives them, the "
                 "sensor at the origin: subtract its position, or give the points as the "
                 "sensor wrote them (and a log's poses as poses=)."
-            )
-        elif problem[0] == "down":
-            text = (
-                f"{of} holds no ground below its sensor, and would with z reversed: a "
-                "sensor mounted upside down (z down)? The ground, the ego vehicle's body "
-                "and the road users' level motions are found with z up: turn the points "
-                "about x (x, y, z -> x, -y, -z)."
             )
         else:
             axis = problem[1]
