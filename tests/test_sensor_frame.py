@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from sklearn.exceptions import ConvergenceWarning
 
 from mmreg import SequenceRegistration, SweepRegistration
 from mmreg.datasets import make_lidar_sequence
@@ -110,3 +111,19 @@ def test_a_log_with_y_up_warns_once_and_one_in_its_sensor_frame_does_not(log):
     with warnings.catch_warnings():
         warnings.simplefilter("error", SensorFrameWarning)
         SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+
+
+def test_correspondences_far_from_their_sensor_warn_but_not_for_the_paper_variant():
+    from mmreg import MultiModelRegistration
+    from mmreg.datasets import make_street
+
+    scene = make_street(random_state=0)
+    X = np.hstack([scene.a, scene.a + scene.flow])
+    with pytest.warns(SensorFrameWarning, match="reads the origin as the sensor") as record:
+        MultiModelRegistration(tau=5.0, random_state=0).fit(X + 1000.0)
+    assert {w.filename for w in record if w.category is SensorFrameWarning} == {__file__}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SensorFrameWarning)
+        warnings.simplefilter("ignore", ConvergenceWarning)  # the paper's EM, 10 steps
+        MultiModelRegistration(tau=5.0, random_state=0).fit(X)
+        MultiModelRegistration(variant="paper", tau=5.0, random_state=0).fit(X + 1000.0)

@@ -31,6 +31,7 @@ from mmreg.em._robust import (
 from mmreg.em._steps import judge_correspondences, range_noise_scale
 from mmreg.estimators._base import MIN_CORRESPONDENCES, BaseRegistration
 from mmreg.init._resolve import INIT_CONSTRAINT, initial_labels, is_label_array
+from mmreg.sweeps._sensor_frame import SensorFrameWarning, sensor_frame_problems
 
 __all__ = ["MultiModelRegistration", "ScaleWarning"]
 
@@ -617,6 +618,7 @@ class MultiModelRegistration(BaseRegistration):
             if is_label_array(init):
                 init = check_labels(init, len(X), name="init labels")[kept]
             X, a, b = X[kept], a[kept], b[kept]
+        self._warn_if_sensor_away(a)
         self._fit_valid(X, a, b, init, ego_motion)
         if kept is not None:
             self._restore_rows(source)
@@ -903,6 +905,26 @@ class MultiModelRegistration(BaseRegistration):
             min_motion=self.min_motion_,
         )
         return models.rotations, models.translations, models.sigmas
+
+    def _warn_if_sensor_away(self, a):
+        """A SensorFrameWarning where the a-points lie farther from the origin than they
+        extend (a map's or world frame): the robust variants read the origin as the
+        sensor (the noise grows with range from it; the static world is the cluster
+        behind the others, seen from it). A 1 km offset changed 4 % of a street's labels
+        (gross errors 10 % -> 14 %); the paper's variant does not read it."""
+        if self.variant == "paper" or a.shape[1] != 3:
+            return
+        for problem in sensor_frame_problems(a):
+            if problem[0] == "away":
+                _, gap, extent = problem
+                warn(
+                    f"the a-points lie {gap:.3g} from the origin, farther than they extend "
+                    f"({extent:.3g}): variant={self.variant!r} reads the origin as the "
+                    "sensor (noise grows with the range from it, and the static world lies "
+                    "behind the objects, seen from it). Give the correspondences in the "
+                    "first sensor's frame (subtract its position).",
+                    SensorFrameWarning,
+                )
 
     def _warn_if_tau_off_scale(self, a, neighbours=None):
         if self.tau is None:

@@ -17,6 +17,7 @@ sweeps' states (:class:`mmreg.sweeps._sweep_state.SweepState`); the estimator ch
 input, makes the states (or takes those a caller keeps) and stores the result.
 """
 
+import warnings
 from numbers import Integral, Real
 
 import numpy as np
@@ -38,7 +39,7 @@ from mmreg._validation import (
 from mmreg.sweeps._cluster_icp import refine_clusters
 from mmreg.sweeps._ground import METRE_TAU
 from mmreg.sweeps._pair import DESKEW_ROUNDS, MIN_SWEEP_POINTS, clusters_of, register_pair
-from mmreg.sweeps._sensor_frame import warn_if_not_sensor_frame
+from mmreg.sweeps._sensor_frame import SensorFrameWarning, warn_if_not_sensor_frame
 from mmreg.sweeps._settings import PairSettings
 from mmreg.sweeps._sweep_state import SweepState
 
@@ -852,7 +853,10 @@ class SweepRegistration(ClusterMixin, BaseEstimator):
             estimator = self._make_estimator(rng, init=init)
             if isinstance(estimator, MultiModelRegistration):
                 estimator._point_memo = memo
-            return estimator.fit(X)
+            with warnings.catch_warnings():
+                # The first sweep's frame is checked once, by the pair (_fit_raw).
+                warnings.simplefilter("ignore", SensorFrameWarning)
+                return estimator.fit(X)
 
         return cluster
 

@@ -75,7 +75,8 @@ def sensor_frame_problems(points):
     problems = []
     gap = float(np.linalg.norm(np.fmax(low, 0.0) + np.fmax(-high, 0.0)))
     extent = float(np.linalg.norm(high - low))
-    if gap > extent:
+    # Coincident points (extent 0) are another problem (a DegenerateInputWarning).
+    if 0 < extent < gap:
         problems.append(("away", gap, extent))
     spread = high - low
     flat = [
