@@ -29,7 +29,7 @@ METRE_TAU = 5.0
 # A z-up sweep spreads far wider than it is tall: its 5-95 % height range is below this
 # share of its widest horizontal range (Argoverse 2 and KITTI sweeps: 0.02-0.1; a camera
 # frame, z forward: about 1).
-FLAT_SHARE = 0.25
+_FLAT_SHARE = 0.25
 # A sweep whose ground was removed before still has low points that Patchwork++ takes for
 # patches of ground (2.3-2.6 % of the points of ground-removed Argoverse 2 sweeps, the
 # bottoms of cars among them); a sweep with its ground holds several times more (13-15 %
@@ -88,8 +88,15 @@ def is_z_up_sweep(points):
     (True, False)
     """
     low, high = np.percentile(points, [5, 95], axis=0)
-    spread = high - low
-    return bool(spread[2] < FLAT_SHARE * max(spread[0], spread[1]))
+    return flat_across(high - low, 2)
+
+
+def flat_across(spread, axis):
+    """Whether points of 5-95 % ``spread`` (per coordinate) lie flat across the other two
+    axes: their range along ``axis`` is under a quarter of the widest of the others
+    (:func:`is_z_up_sweep` with ``axis`` 2)."""
+    others = [spread[k] for k in range(3) if k != axis]
+    return bool(spread[axis] < _FLAT_SHARE * max(others))
 
 
 def _patchwork():

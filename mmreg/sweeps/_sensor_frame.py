@@ -22,7 +22,7 @@ tells both from what the points show alone:
 import numpy as np
 
 from mmreg._warnings import warn
-from mmreg.sweeps._ground import FLAT_SHARE
+from mmreg.sweeps._ground import flat_across
 
 __all__ = ["SensorFrameWarning", "sensor_frame_problems", "warn_if_not_sensor_frame"]
 
@@ -79,12 +79,7 @@ def sensor_frame_problems(points):
     if 0 < extent < gap:
         problems.append(("away", gap, extent))
     spread = high - low
-    flat = [
-        axis
-        for axis in (0, 1)
-        if spread[axis] < FLAT_SHARE * max(np.delete(spread, axis))
-        and not spread[2] < FLAT_SHARE * max(spread[:2])
-    ]
+    flat = [axis for axis in (0, 1) if flat_across(spread, axis) and not flat_across(spread, 2)]
     if flat:
         problems.append(("up", "xy"[min(flat, key=lambda axis: spread[axis])]))
     return problems
