@@ -295,6 +295,11 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
     )
 
 
+# A given rotation is one within this: R^T R = I to it (odometry's poses, written to a
+# few digits, are).
+ROTATION_TOLERANCE = 1e-4
+
+
 def check_ego_motion(ego_motion, d=3):
     """``ego_motion`` as ``(R, t)`` of shapes ``(d, d)`` and ``(d,)``, from ``(R, t)`` or a
     homogeneous ``(d + 1, d + 1)`` matrix; None stays None. One clear error otherwise.
@@ -338,7 +343,8 @@ def check_ego_motion(ego_motion, d=3):
         )
     if not (np.all(np.isfinite(rotation)) and np.all(np.isfinite(translation))):
         raise ValueError("ego_motion holds NaN or infinite values.")
-    if not np.allclose(rotation.T @ rotation, np.eye(d), atol=1e-4) or np.linalg.det(rotation) < 0:
+    gram_ok = np.allclose(rotation.T @ rotation, np.eye(d), atol=ROTATION_TOLERANCE)
+    if not gram_ok or np.linalg.det(rotation) < 0:
         raise ValueError(
             "ego_motion's R is not a rotation (R^T R = I and det R = 1 within 1e-4); "
             "give the static world's motion from the first frame to the second, b = R a + t."

@@ -19,10 +19,10 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval
 
 from mmreg._array.neighbors import query_workers
-from mmreg._validation import invalid_points
+from mmreg._validation import ROTATION_TOLERANCE, invalid_points
 from mmreg._warnings import warn
 from mmreg.estimators._multi_model_registration import ScaleWarning, warn_if_tau_off_scale
-from mmreg.sweeps._sensor_frame import SensorFrameWarning, warn_if_not_sensor_frame
+from mmreg.sweeps._sensor_frame import SensorFrameWarning
 from mmreg.tracking._log import LogTracker
 from mmreg.tracking._pair_process import PairsAhead
 
@@ -42,8 +42,6 @@ _MIN_ISLAND_SIZE = 12
 # leave nothing to track (a car drives 100 m or more between them): such times
 # are milliseconds or finer, most likely.
 _MAX_FRAME_INTERVAL = 10.0
-# A given pose's rotation is one within this (as a pair's ego_motion start must be).
-_ROTATION_TOLERANCE = 1e-4
 
 
 class SequenceRegistration(BaseEstimator):
@@ -252,13 +250,11 @@ class SequenceRegistration(BaseEstimator):
         del self._run  # a later partial_fit starts a log of its own
         try:
             results = []
-            told = set()  # what the frames' sensor frame warned of (once a log)
             for k in range(n):
                 frame = frames[k]
                 points = getattr(frame, "points", frame)
                 if k == 0:
                     _warn_if_off_scale(points, self.tau)
-                told |= _warn_if_not_sensor_frame(points, k, told)
                 results += run.add(
                     points,
                     None if times is None else times[k],
@@ -316,7 +312,6 @@ class SequenceRegistration(BaseEstimator):
         if not hasattr(self, "_run"):
             self._validate_params()
             _warn_if_off_scale(points, self.tau)
-            self._sensor_frame_told = set()
             if time is None:
                 _warn_if_period(self.frame_rate)
             self._reset(processes=query_workers(self.n_jobs))
@@ -332,9 +327,6 @@ class SequenceRegistration(BaseEstimator):
             pose = self._check_poses(np.asarray(pose, dtype=float)[None], 1)[0]
         if point_times is not None and time is None:
             raise ValueError("point_times goes with time: the frame's time in seconds.")
-        self._sensor_frame_told |= _warn_if_not_sensor_frame(
-            points, self._run.n_frames, self._sensor_frame_told
-        )
         if self._run.n_frames == 0:
             self._first_time = time
         self.finished_ = self._run.add(points, time, pose, point_times)
@@ -396,15 +388,15 @@ class SequenceRegistration(BaseEstimator):
         rotations = poses[:, :3, :3]
         gram = np.einsum("kji,kjl->kil", rotations, rotations)
         rigid = (
-            np.all(np.abs(gram - np.eye(3)) <= _ROTATION_TOLERANCE, axis=(1, 2))
+            np.all(np.abs(gram - np.eye(3)) <= ROTATION_TOLERANCE, axis=(1, 2))
             & (np.linalg.det(rotations) > 0)
-            & np.all(np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]) <= _ROTATION_TOLERANCE, axis=1)
+            & np.all(np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]) <= ROTATION_TOLERANCE, axis=1)
         )
         if not rigid.all():
             k = int(np.flatnonzero(~rigid)[0])
             raise ValueError(
                 f"poses[{k}] is not a rigid motion (a rotation, R^T R = I and det R = 1 "
-                f"within {_ROTATION_TOLERANCE:g}, and a last row 0 0 0 1); got "
+                f"within {ROTATION_TOLERANCE:g}, and a last row 0 0 0 1); got "
                 f"{np.array2string(poses[k], precision=4, separator=', ')}. poses are the "
                 "sensor's poses, world from sensor, as 4 x 4 matrices."
             )
@@ -431,20 +423,6 @@ def _warn_if_off_scale(points, tau):
     points = points[~invalid_points(points)]
     if len(points) >= 2:
         warn_if_tau_off_scale(points, tau, "the first frame")
-
-
-def _warn_if_not_sensor_frame(points, index, told):
-    """A :class:`~mmreg.estimators.SensorFrameWarning` where frame ``index`` (its valid
-    returns) is not in its sensor's frame, of a kind not yet ``told``; the kinds it
-    warned of. Whether z is up is asked of the first frame; where the sensor is, of every
-    frame (a log in a world frame leaves the origin as it drives)."""
-    wanted = {"away"} if index else {"away", "up"}
-    wanted -= told
-    points = np.asarray(points, dtype=float) if wanted else None
-    if not wanted or points.ndim != 2 or points.shape[1] < 3:
-        return set()
-    points = points[:, :3]
-    return warn_if_not_sensor_frame(points[~invalid_points(points)], f"frame {index}", wanted)
 
 
 def _warn_if_not_seconds(intervals):

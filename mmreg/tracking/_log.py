@@ -43,6 +43,7 @@ from mmreg.sweeps._islands import voxel_islands
 from mmreg.sweeps._level_icp import level_icp, level_part
 from mmreg.sweeps._motion_bounds import impossible_motions, max_travel
 from mmreg.sweeps._new_places import MIN_NEW_PLACE
+from mmreg.sweeps._sensor_frame import warn_if_not_sensor_frame
 from mmreg.tracking._births import moved_places, new_place_share, place_starts
 from mmreg.tracking._evidence import near_points, on_level, track_claim
 from mmreg.tracking._long_span import kept_frames, long_partner, pair_motion, refuted
@@ -261,7 +262,11 @@ class LogTracker:
 
     def new_frame(self, index, points, time, pose, point_times=None):
         """Frame ``index`` of the log as the steps hold it (its valid rows, the rows it is
-        registered on, its time, whether it is z-up); it changes nothing of the log."""
+        registered on, its time, whether it is z-up); it changes nothing of the log but
+        what the log has warned of: where frames are not in their sensor's frame
+        (:func:`~mmreg.sweeps._sensor_frame.warn_if_not_sensor_frame`), once a log;
+        which axis is up is asked of the first frame, where the sensor is of every frame
+        (a log in a world frame leaves the origin as it drives)."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] < 3:
             raise ValueError(f"a frame must have shape (n, 3); got {points.shape}.")
@@ -279,7 +284,11 @@ class LogTracker:
                 )
             frame.point_times = point_times[used]
         frame.seconds = time is not None or self.frame_rate is not None
-        if valid.sum() >= 3 and is_z_up_sweep(points[valid]):
+        returns = points[valid]
+        wanted = ({"away"} if index else {"away", "up"}) - self._state.told
+        if wanted:
+            self._state.told |= warn_if_not_sensor_frame(returns, f"frame {index}", wanted)
+        if len(returns) >= 3 and is_z_up_sweep(returns):
             frame.up = np.array([0.0, 0.0, 1.0])
         return frame
 
@@ -1187,6 +1196,7 @@ class _LogState:
 
     last_first: LogFrame | None = None  # the last frame that was a pair's first sweep
     recent: list = field(default_factory=list)  # past first sweeps, for the long span
+    told: set = field(default_factory=set)  # SensorFrameWarning kinds warned (once a log)
 
 
 class _Span(NamedTuple):
