@@ -5,7 +5,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
+from mmreg import SequenceRegistration
+from mmreg.datasets import make_lidar_sequence
+from mmreg.sweeps._ambiguous_shapes import slides_along_line
 from mmreg.sweeps._icp import SurfaceNormals
 from mmreg.tracking._births import moved_places, new_place_share, place_starts
 from mmreg.tracking._motion import to_matrix, transform
@@ -108,3 +112,43 @@ def test_place_starts_shift_onto_the_nearest_places_within_reach(shift, n_far):
 @pytest.mark.parametrize("reached", [[], [BOX + [30.0, 0.0, 0.0]]])
 def test_no_place_reached_within_reach_gives_no_start(reached):
     assert place_starts([BOX], reached, np.eye(4), reach=10.0) == [[]]
+
+
+@given(
+    angles=st.tuples(*[st.floats(-np.pi, np.pi)] * 3),
+    length=st.floats(0.5, 10.0),
+    shift=st.floats(0.2, 5.0),
+    seed=st.integers(0, 2**16),
+)
+def test_a_line_slides_along_itself_not_across(angles, length, shift, seed):
+    rng = np.random.default_rng(seed)
+    turn = Rotation.from_euler("xyz", angles).as_matrix()
+    strip = np.c_[rng.uniform(0, length, 80), rng.normal(0, 0.01, (80, 2))] @ turn.T + [5, 2, 0]
+    along, side = turn[:, 0], turn[:, 1]
+    ego = (Rotation.from_euler("z", 0.1).as_matrix(), np.array([1.0, 0.0, 0.0]))
+    # Along the line; and at 0.8 of the length across it (0.5 is the bound).
+    steps = [along, 0.6 * along + 0.8 * side]
+    translations = np.array([ego[1] + shift * ego[0] @ step for step in steps])
+    rotations = np.stack([ego[0], ego[0]])
+    groups = np.repeat([0, 1], 80)
+    slides = slides_along_line(np.vstack([strip, strip]), groups, 2, (rotations, translations), ego)
+    assert slides.tolist() == [True, False]
+    # A square patch is no line: it never slides along one.
+    patch = np.c_[rng.uniform(0, length, (80, 2)), np.zeros(80)] @ turn.T
+    motion = (rotations[:1], translations[:1])
+    assert not slides_along_line(patch, np.zeros(80, int), 1, motion, ego)[0]
+
+
+def test_scan_rings_across_a_wall_are_no_mover():
+    # A street with nothing moving, scanned by 21 rings 2 degrees apart (a VLP-16's
+    # spacing): one ring's curve across a far facade travels with the sensor, a place
+    # left and one reached every pair. Before such a line's slide along itself was
+    # refused, a track was born on it and held 45-49 points moving in each of the last
+    # three frames.
+    log = make_lidar_sequence(
+        8, n_moving=0, n_braking=0, n_overtaking=0, n_walkers=0, n_cyclists=0,
+        n_standing=0, n_beams=21, random_state=0,
+    )  # fmt: skip
+    est = SequenceRegistration(random_state=0).fit(log.frames, times=log.times)
+    assert est.n_tracks_ == 0
+    assert not any(moving.any() for moving in est.moving_)

@@ -4,7 +4,8 @@ A flat island (a patch of road, a wall) fits its second view wherever that view
 continues in the plane: a motion within the plane is not evidence that it moved. A
 flat piece of a moving object still counts when its motion has a clear component
 across the plane (the rear of a car driving away). A thin line of points (a pole, a
-post) fits any other pole of a street as well as its own second view.
+post) fits any other pole of a street as well as its own second view, and a line slid
+along itself (a scan ring across a wall) its own.
 """
 
 import numpy as np
@@ -12,7 +13,7 @@ import numpy as np
 from mmreg._array.geometry import departures
 from mmreg._array.moments import group_moments
 
-__all__ = ["ACROSS", "is_line", "shapes", "slides_in_plane"]
+__all__ = ["ACROSS", "is_line", "shapes", "slides_along_line", "slides_in_plane"]
 
 # Flat: the smallest spread (variance) of the island's points under this share of the
 # middle one; a line: the middle one under this share of the largest.
@@ -61,6 +62,59 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     displacement = departures(moments.mean_a, rotations, translations, ego)
     across = np.abs(np.einsum("ki,ki->k", displacement, normal))
     return flat & (across < ACROSS * np.linalg.norm(displacement, axis=1))
+
+
+def slides_along_line(points, groups, n_groups, motions, ego):
+    """Whether each group lies along a line and its motion, relative to the ego motion,
+    runs along it.
+
+    A line slid along itself fits its second view wherever that view continues (the
+    aperture problem): one scan ring's cone crosses a wall along a curve that travels
+    with the sensor, and where the rings lie far apart (2 degrees) none above or below
+    shows the wall's surface, so the curve seems to move with the sensor from sweep to
+    sweep. The motion is ambiguous where its component across the line is under
+    ``ACROSS`` of its length.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, 3)
+    groups : ndarray of shape (n,)
+        Group of every point in ``0..n_groups-1`` (negative: none).
+    n_groups : int
+    motions : tuple of ndarray
+        ``(rotations, translations)``, one per group.
+    ego : tuple of ndarray
+        ``(R, t)`` of the ego motion.
+
+    Returns
+    -------
+    slides : ndarray of bool, shape (n_groups,)
+
+    Examples
+    --------
+    A thin strip 6 m long moved 2 m along itself slides; moved 2 m across it, or a
+    square patch moved alike, does not.
+
+    >>> import numpy as np
+    >>> from mmreg.sweeps._ambiguous_shapes import slides_along_line
+    >>> rng = np.random.default_rng(0)
+    >>> strip = np.c_[rng.uniform(0, 6, 100), rng.normal(0, 0.02, (100, 2))]
+    >>> patch = np.c_[rng.uniform(0, 2, (100, 2)), np.zeros(100)]
+    >>> points = np.vstack([strip, strip, patch])
+    >>> groups = np.repeat([0, 1, 2], 100)
+    >>> motions = (np.stack([np.eye(3)] * 3), np.array([[2.0, 0, 0], [0, 2.0, 0], [2.0, 0, 0]]))
+    >>> ego = (np.eye(3), np.zeros(3))
+    >>> slides_along_line(points, groups, 3, motions, ego)
+    array([ True, False, False])
+    """
+    moments, spread, axes = _principal_axes(points, groups, n_groups)
+    line = spread[:, 1] < _FLATNESS * spread[:, 2]
+    axis = axes[:, :, 2] @ ego[0].T  # where the ego motion turns the line
+    rotations, translations = motions
+    displacement = departures(moments.mean_a, rotations, translations, ego)
+    along = np.einsum("ki,ki->k", displacement, axis)
+    across = np.linalg.norm(displacement - along[:, None] * axis, axis=1)
+    return line & (across < ACROSS * np.linalg.norm(displacement, axis=1))
 
 
 def shapes(points, groups, n_groups):

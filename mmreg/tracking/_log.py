@@ -36,6 +36,7 @@ from mmreg._array.neighbors import lookup_tree
 from mmreg._array.unique_rows import unique_rows
 from mmreg._validation import invalid_points
 from mmreg._warnings import warn
+from mmreg.sweeps._ambiguous_shapes import slides_along_line
 from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio
 from mmreg.sweeps._ground import is_z_up_sweep
 from mmreg.sweeps._icp import SurfaceNormals
@@ -549,7 +550,11 @@ class LogTracker:
             tight = np.union1d(near_points(first, first[rows], _TIGHT * self.tau, near), body)
             tight = tight[free[tight]]
             claim = self._claim(previous, other, ego, scale, near, tight, tries, self.min_points)
-            motion = None if claim is None else accept(claim)
+            # A line slid along itself is no motion: one scan ring across a far wall,
+            # where the rings lie far apart, travels with the sensor along the wall.
+            if claim is None or _slides_along_line(first[claim.rows], claim.motion, ego):
+                continue
+            motion = accept(claim)
             if motion is None:
                 continue
             # A repeated structure slid onto itself by one period lands on no new place.
@@ -1231,6 +1236,14 @@ def _on_evidence(points, rows, shown, still, cell):
     resting = np.bincount(labels, weights=still, minlength=n) / sizes > 0.5
     other = resting & (share < _PIECE_SHARE * held.mean())
     return rows[~other[labels]]
+
+
+def _slides_along_line(points, motion, ego):
+    """Whether ``points`` lie along a line that ``motion`` (4 x 4) slides along itself,
+    relative to ``ego`` (4 x 4)."""
+    motions = (motion[None, :3, :3], motion[None, :3, 3])
+    groups = np.zeros(len(points), dtype=np.intp)
+    return bool(slides_along_line(points, groups, 1, motions, (ego[:3, :3], ego[:3, 3]))[0])
 
 
 def _off_the_ground(frame, rows, shown, margin):
