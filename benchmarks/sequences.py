@@ -12,9 +12,10 @@ The logs:
   ``tar xJf ../shared/realdata/nuscenes_sequences/scene-0004.tar.xz -C DIR``. Never commit
   them;
 * generated logs (:func:`mmreg.datasets.make_lidar_sequence`, 20 frames of 32 x 1024 rays,
-  at 10 Hz and 2 Hz, seeds 0 and 1, and of 64 x 2048 rays at 10 Hz, an HDL-64's 113k points
-  a frame): cars cruising, braking and passing, walkers, cyclists, parked cars, with every
-  object's id in every frame.
+  at 10 Hz and 2 Hz, seeds 0 and 1, of 64 x 2048 rays at 10 Hz, an HDL-64's 113k points
+  a frame, and of 21 x 1024 rays at 10 Hz, seeds 0 and 1, rings 2 degrees apart as a
+  VLP-16's): cars cruising, braking and passing, walkers, cyclists, parked cars, with
+  every object's id in every frame.
 
 For each log, ``SequenceRegistration(random_state=0, n_jobs=2)`` (times from the log; its
 pairs in a process of their own beside the tracks, ``--jobs``) and, with
@@ -285,7 +286,9 @@ def main(argv=None):
     parser.add_argument("--data", default="/work/data", help="folder of the nuScenes logs")
     parser.add_argument("--pairs", action="store_true", help="also each pair alone")
     parser.add_argument(
-        "--generated", default="10:0,10:1,2:0,2:1,10:0:64", help="rate:seed[:beams],..."
+        "--generated",
+        default="10:0,10:1,2:0,2:1,10:0:64,10:0:21,10:1:21",
+        help="rate:seed[:beams],...",
     )
     parser.add_argument(
         "--repeats", type=int, default=3, help="timed runs of each method (the median)"
