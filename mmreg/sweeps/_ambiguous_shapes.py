@@ -55,13 +55,10 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     >>> slides_in_plane(np.vstack([patch, patch]), groups, 2, (rotations, translations), ego)
     array([ True, False])
     """
-    moments, spread, axes = _principal_axes(points, groups, n_groups)
-    flat = _flat(spread)
-    normal = axes[:, :, 0] @ ego[0].T  # where the ego motion turns the plane
-    rotations, translations = motions
-    displacement = departures(moments.mean_a, rotations, translations, ego)
+    spread, axes, displacement = _turned_axes(points, groups, n_groups, motions, ego)
+    normal = axes[:, :, 0]
     across = np.abs(np.einsum("ki,ki->k", displacement, normal))
-    return flat & (across < ACROSS * np.linalg.norm(displacement, axis=1))
+    return _flat(spread) & (across < ACROSS * np.linalg.norm(displacement, axis=1))
 
 
 def slides_along_line(points, groups, n_groups, motions, ego):
@@ -73,22 +70,7 @@ def slides_along_line(points, groups, n_groups, motions, ego):
     with the sensor, and where the rings lie far apart (2 degrees) none above or below
     shows the wall's surface, so the curve seems to move with the sensor from sweep to
     sweep. The motion is ambiguous where its component across the line is under
-    ``ACROSS`` of its length.
-
-    Parameters
-    ----------
-    points : ndarray of shape (n, 3)
-    groups : ndarray of shape (n,)
-        Group of every point in ``0..n_groups-1`` (negative: none).
-    n_groups : int
-    motions : tuple of ndarray
-        ``(rotations, translations)``, one per group.
-    ego : tuple of ndarray
-        ``(R, t)`` of the ego motion.
-
-    Returns
-    -------
-    slides : ndarray of bool, shape (n_groups,)
+    ``ACROSS`` of its length. Parameters and result as :func:`slides_in_plane`'s.
 
     Examples
     --------
@@ -107,14 +89,11 @@ def slides_along_line(points, groups, n_groups, motions, ego):
     >>> slides_along_line(points, groups, 3, motions, ego)
     array([ True, False, False])
     """
-    moments, spread, axes = _principal_axes(points, groups, n_groups)
-    line = spread[:, 1] < _FLATNESS * spread[:, 2]
-    axis = axes[:, :, 2] @ ego[0].T  # where the ego motion turns the line
-    rotations, translations = motions
-    displacement = departures(moments.mean_a, rotations, translations, ego)
+    spread, axes, displacement = _turned_axes(points, groups, n_groups, motions, ego)
+    axis = axes[:, :, 2]
     along = np.einsum("ki,ki->k", displacement, axis)
     across = np.linalg.norm(displacement - along[:, None] * axis, axis=1)
-    return line & (across < ACROSS * np.linalg.norm(displacement, axis=1))
+    return _line(spread) & (across < ACROSS * np.linalg.norm(displacement, axis=1))
 
 
 def shapes(points, groups, n_groups):
@@ -147,7 +126,7 @@ def shapes(points, groups, n_groups):
     ([True, False, False], [False, True, False])
     """
     _, spread, _ = _principal_axes(points, groups, n_groups)
-    return _flat(spread), spread[:, 1] < _FLATNESS * spread[:, 2]
+    return _flat(spread), _line(spread)
 
 
 def is_line(points, groups, n_groups):
@@ -169,6 +148,21 @@ def is_line(points, groups, n_groups):
 def _flat(spread):
     """Whether the smallest of each row of ascending spreads is small beside the middle."""
     return spread[:, 0] < _FLATNESS * spread[:, 1]
+
+
+def _line(spread):
+    """Whether the middle of each row of ascending spreads is small beside the largest."""
+    return spread[:, 1] < _FLATNESS * spread[:, 2]
+
+
+def _turned_axes(points, groups, n_groups, motions, ego):
+    """Each group's spreads (ascending), its principal axes where the ego motion turns
+    them (columns), and its centroid's departure from the ego motion under its own."""
+    moments, spread, axes = _principal_axes(points, groups, n_groups)
+    rotations, translations = motions
+    displacement = departures(moments.mean_a, rotations, translations, ego)
+    turned = np.stack([axes[:, :, c] @ ego[0].T for c in range(3)], axis=2)
+    return spread, turned, displacement
 
 
 def _principal_axes(points, groups, n_groups):
