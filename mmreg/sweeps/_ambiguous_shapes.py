@@ -55,8 +55,7 @@ def slides_in_plane(points, groups, n_groups, motions, ego):
     >>> slides_in_plane(np.vstack([patch, patch]), groups, 2, (rotations, translations), ego)
     array([ True, False])
     """
-    spread, axes, displacement = _turned_axes(points, groups, n_groups, motions, ego)
-    normal = axes[:, :, 0]
+    spread, normal, displacement = _turned_axis(points, groups, n_groups, motions, ego, 0)
     across = np.abs(np.einsum("ki,ki->k", displacement, normal))
     return _flat(spread) & (across < ACROSS * np.linalg.norm(displacement, axis=1))
 
@@ -89,8 +88,7 @@ def slides_along_line(points, groups, n_groups, motions, ego):
     >>> slides_along_line(points, groups, 3, motions, ego)
     array([ True, False, False])
     """
-    spread, axes, displacement = _turned_axes(points, groups, n_groups, motions, ego)
-    axis = axes[:, :, 2]
+    spread, axis, displacement = _turned_axis(points, groups, n_groups, motions, ego, 2)
     along = np.einsum("ki,ki->k", displacement, axis)
     across = np.linalg.norm(displacement - along[:, None] * axis, axis=1)
     return _line(spread) & (across < ACROSS * np.linalg.norm(displacement, axis=1))
@@ -155,14 +153,14 @@ def _line(spread):
     return spread[:, 1] < _FLATNESS * spread[:, 2]
 
 
-def _turned_axes(points, groups, n_groups, motions, ego):
-    """Each group's spreads (ascending), its principal axes where the ego motion turns
-    them (columns), and its centroid's departure from the ego motion under its own."""
+def _turned_axis(points, groups, n_groups, motions, ego, rank):
+    """Each group's spreads (ascending), its principal axis of that ``rank`` (0: the
+    least spread) where the ego motion turns it, and its centroid's departure from the
+    ego motion under its own motion."""
     moments, spread, axes = _principal_axes(points, groups, n_groups)
     rotations, translations = motions
     displacement = departures(moments.mean_a, rotations, translations, ego)
-    turned = np.stack([axes[:, :, c] @ ego[0].T for c in range(3)], axis=2)
-    return spread, turned, displacement
+    return spread, axes[:, :, rank] @ ego[0].T, displacement
 
 
 def _principal_axes(points, groups, n_groups):
