@@ -4,7 +4,7 @@ import numpy as np
 
 __all__ = ["MAX_ABS_COORDINATE", "check_coordinate_range", "check_labels", "compact_labels"]
 __all__ += ["MAX_INCOHERENCE", "NotCorrespondencesError", "check_paired", "invalid_rows"]
-__all__ += ["check_ego_motion", "split_correspondences"]
+__all__ += ["are_rotations", "check_ego_motion", "split_correspondences"]
 
 #: Rows of correspondences pair a point with where it went, so neighbouring a-points
 #: move alike. Stacked rows whose flows ``b - a`` differ between nearest a-points by a
@@ -296,8 +296,25 @@ def check_paired(a, b, tau=None, nearest=None, spacing=None):
 
 
 # A given rotation is one within this: R^T R = I to it (odometry's poses, written to a
-# few digits, are).
+# few digits, are: KITTI's with 7 significant digits, errors near 1e-6).
 ROTATION_TOLERANCE = 1e-4
+
+
+def are_rotations(matrices):
+    """Whether each of ``matrices`` (``(..., d, d)``) is a rotation to
+    ``ROTATION_TOLERANCE``: every entry of ``R^T R - I`` within it, and ``det R > 0``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mmreg._validation import are_rotations
+    >>> are_rotations(np.stack([np.eye(3), np.diag([1.0, 1.0, -1.0]), 2 * np.eye(3)]))
+    array([ True, False, False])
+    """
+    matrices = np.asarray(matrices, dtype=float)
+    gram = np.swapaxes(matrices, -1, -2) @ matrices
+    close = np.all(np.abs(gram - np.eye(matrices.shape[-1])) <= ROTATION_TOLERANCE, axis=(-2, -1))
+    return close & (np.linalg.det(matrices) > 0)
 
 
 def check_ego_motion(ego_motion, d=3):
@@ -343,10 +360,10 @@ def check_ego_motion(ego_motion, d=3):
         )
     if not (np.all(np.isfinite(rotation)) and np.all(np.isfinite(translation))):
         raise ValueError("ego_motion holds NaN or infinite values.")
-    gram_ok = np.allclose(rotation.T @ rotation, np.eye(d), atol=ROTATION_TOLERANCE)
-    if not gram_ok or np.linalg.det(rotation) < 0:
+    if not are_rotations(rotation):
         raise ValueError(
-            "ego_motion's R is not a rotation (R^T R = I and det R = 1 within 1e-4); "
+            f"ego_motion's R is not a rotation (R^T R = I and det R = 1 within "
+            f"{ROTATION_TOLERANCE:g}); "
             "give the static world's motion from the first frame to the second, b = R a + t."
         )
     return rotation, translation

@@ -90,3 +90,36 @@ def test_writing_errors_leave_no_file(tmp_path, poses, message):
     with pytest.raises(ValueError, match=message):
         write_kitti_poses(tmp_path / "poses.txt", poses)
     assert not any(tmp_path.iterdir())
+
+
+@given(
+    rotvec=st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),
+    stretch=st.sampled_from([1e-5, -1e-5, 1e-3, -1e-3]),
+    mirrored=st.booleans(),
+)
+def test_every_input_takes_the_same_rotations(tmp_path_factory, rotvec, stretch, mirrored):
+    # An ego motion, a log's poses and a KITTI pose file accept the same matrices: a
+    # rotation scaled by 1 +- 1e-5 (R^T R off by 2e-5), not one scaled by 1 +- 1e-3 (2e-3)
+    # nor a mirror.
+    from mmreg import SequenceRegistration
+    from mmreg._validation import check_ego_motion
+
+    rotation = Rotation.from_rotvec(rotvec).as_matrix() * (1.0 + stretch)
+    if mirrored:
+        rotation = rotation @ np.diag([1.0, 1.0, -1.0])
+    pose = np.eye(4)
+    pose[:3, :3] = rotation
+    expected = abs(stretch) < 1e-4 and not mirrored
+    verdicts = []
+    for check in (
+        lambda: check_ego_motion((rotation, np.zeros(3))),
+        lambda: SequenceRegistration()._check_poses(np.stack([np.eye(4), pose]), 2),
+        lambda: write_kitti_poses(tmp_path_factory.mktemp("p") / "p.txt", pose[None]),
+    ):
+        try:
+            check()
+            verdicts.append(True)
+        except ValueError as error:
+            assert "rotation" in str(error) or "rigid" in str(error)
+            verdicts.append(False)
+    assert verdicts == [expected] * 3

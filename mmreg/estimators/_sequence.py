@@ -19,7 +19,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval
 
 from mmreg._array.neighbors import query_workers
-from mmreg._validation import ROTATION_TOLERANCE, invalid_points
+from mmreg._validation import ROTATION_TOLERANCE, are_rotations, invalid_points
 from mmreg._warnings import warn
 from mmreg.estimators._multi_model_registration import ScaleWarning, warn_if_tau_off_scale
 from mmreg.sweeps._sensor_frame import SensorFrameWarning
@@ -385,12 +385,8 @@ class SequenceRegistration(BaseEstimator):
         if poses.shape != (n, 4, 4) or not np.all(np.isfinite(poses)):
             raise ValueError(f"poses must have shape ({n}, 4, 4) and be finite.")
         # A pose is rigid: a rotation (to the pairs' tolerance) and a last row 0 0 0 1.
-        rotations = poses[:, :3, :3]
-        gram = np.einsum("kji,kjl->kil", rotations, rotations)
-        rigid = (
-            np.all(np.abs(gram - np.eye(3)) <= ROTATION_TOLERANCE, axis=(1, 2))
-            & (np.linalg.det(rotations) > 0)
-            & np.all(np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]) <= ROTATION_TOLERANCE, axis=1)
+        rigid = are_rotations(poses[:, :3, :3]) & np.all(
+            np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]) <= ROTATION_TOLERANCE, axis=1
         )
         if not rigid.all():
             k = int(np.flatnonzero(~rigid)[0])

@@ -2,15 +2,12 @@
 
 import numpy as np
 
+from mmreg._validation import ROTATION_TOLERANCE, are_rotations
 from mmreg.io._arrays import _load_text_table
 from mmreg.io._atomic import atomic_write
 from mmreg.io._checks import _as_numeric, _check_readable
 
 __all__ = ["read_kitti_poses", "write_kitti_poses"]
-
-# R^T R = I and det R = 1 within this: KITTI's own poses are written with 7 significant
-# digits (errors near 1e-6), and mmreg's input checks allow the same 1e-4.
-RIGID_TOLERANCE = 1e-4
 
 
 def _kitti_matrices(path, n_values, what):
@@ -31,10 +28,7 @@ def _kitti_matrices(path, n_values, what):
 
 def _not_rigid(rotations):
     """Indices of the rotations that are not rotations (R^T R != I or det R != 1)."""
-    gram = np.einsum("nji,njk->nik", rotations, rotations)
-    off = np.abs(gram - np.eye(3)).max(axis=(1, 2))
-    det = np.linalg.det(rotations)
-    return np.flatnonzero((off > RIGID_TOLERANCE) | (np.abs(det - 1.0) > RIGID_TOLERANCE))
+    return np.flatnonzero(~are_rotations(rotations))
 
 
 def read_kitti_poses(path):
@@ -87,7 +81,7 @@ def read_kitti_poses(path):
     if len(bad):
         raise ValueError(
             f"{path}: the rotation of {len(bad)} pose(s) is not a rotation (R^T R = I and "
-            f"det R = 1 within {RIGID_TOLERANCE:g}), the first on line {bad[0] + 1} of the "
+            f"det R = 1 within {ROTATION_TOLERANCE:g}), the first on line {bad[0] + 1} of the "
             "data."
         )
     return poses
@@ -145,7 +139,7 @@ def write_kitti_poses(path, poses):
     if len(bad):
         raise ValueError(
             f"poses[{bad[0]}]'s rotation is not a rotation (R^T R = I and det R = 1 within "
-            f"{RIGID_TOLERANCE:g}); {len(bad)} pose(s) are not rigid."
+            f"{ROTATION_TOLERANCE:g}); {len(bad)} pose(s) are not rigid."
         )
     rows = poses[:, :3].reshape(len(poses), 12).tolist()
     with atomic_write(path, "w") as handle:
