@@ -15,13 +15,7 @@ import numpy as np
 
 from mmreg._array.geometry import rows_in_box
 from mmreg._array.neighbors import lookup_tree
-from mmreg.sweeps._explained import (
-    EXPLAINED_SPACINGS,
-    MIN_FLATNESS,
-    across_rings,
-    spacing_ratio,
-    unexplained_at,
-)
+from mmreg.sweeps._explained import EXPLAINED_SPACINGS, spacing_ratio, unexplained_at
 from mmreg.sweeps._icp import multi_body_icp
 from mmreg.sweeps._level_icp import level_icps, level_part
 from mmreg.tracking._motion import transform
@@ -113,10 +107,9 @@ class _Answers:
     asked, kept: a claim asks of the same points under the ego motion and every start,
     and again under each refined motion (the tree is queried once per motion)."""
 
-    def __init__(self, points, target, scale, view=None, margin=0.0, up=None):
+    def __init__(self, points, target, scale, view=None, margin=0.0):
         self.points, self.target, self.scale = points, target, scale
         self.view, self.margin = view, margin
-        self.up = up  # the vertical of a z-up sweep: its level rings' gaps are read
         self._moved = {}  # motion's bytes -> (moved points, (ratio, nearest, spacing))
         self._unexplained = {}
         self._occluder = {}  # motion's bytes -> the nearest return towards each point
@@ -149,13 +142,8 @@ class _Answers:
         """Whether the sweep leaves each point unexplained where ``motion`` puts it."""
         key = motion.tobytes()
         if key not in self._unexplained:
-            sweep, tree, normals = self.target
+            sweep, _, normals = self.target
             moved, nearest_spacings = self.moved(motion)
-            if self.up is not None:
-                # A point between two of a sparse sensor's rings is no sign of motion.
-                nearest_spacings = across_rings(
-                    moved, nearest_spacings, tree, sweep, normals, self.up
-                )
             self._unexplained[key] = unexplained_at(
                 moved, nearest_spacings, sweep, normals, self.scale
             )
@@ -257,10 +245,7 @@ def track_claim(
     the one with the most evidence: a long side with a repeated structure fits shifts a
     period apart with like evidence, and only the whole body tells them apart. ``up``:
     the vertical of z-up sweeps, along which a road user's motion is kept level
-    (:mod:`mmreg.sweeps._level_icp`), and across whose level scan rings a point between
-    two rings of the second sweep is not unexplained (:func:`~mmreg.sweeps._explained.
-    across_rings`: a sparse sensor's rings cross a surface along curves that move with
-    it); None: free.
+    (:mod:`mmreg.sweeps._level_icp`); None: free.
     ``view`` and ``margin``: the second sweep's range image; points it could not have
     seen are no evidence either way (see :func:`claimed_points`). ``surface``: the
     first sweep's :class:`~mmreg.sweeps._icp.SurfaceNormals`; with ``up``, points on
@@ -277,7 +262,7 @@ def track_claim(
     # points (a car near a 64-beam sensor holds thousands); the winner on them all.
     near_sample, tight_sample = _thin(near), _thin(tight)
     share = len(near) / len(near_sample)
-    on_sample = _Answers(points[near_sample], target, scale, view, margin, up)
+    on_sample = _Answers(points[near_sample], target, scale, view, margin)
     on_tight_sample = _Answers(points[tight_sample], target, scale)
     seeds, motions, counts = [], [], []
     on_sample.ask([ego, *starts])  # the ego motion's and each start's, asked below
@@ -328,14 +313,12 @@ def track_claim(
             refined = np.eye(4)
             refined[:3, :3], refined[:3, 3] = result.rotations[k], result.translations[k]
             refined_motions.append(refined)
-    on_near = _Answers(points[near], target, scale, view, margin, up)
+    on_near = _Answers(points[near], target, scale, view, margin)
     on_near.ask([ego, *refined_motions])  # each is asked below
     on_tight = _Answers(points[tight], target, scale)
     sliding = np.zeros(len(near), dtype=bool)
     if up is not None and surface is not None:
-        # A neighbourhood on one scan ring (a line) has no normal (any direction across
-        # the ring fits, up as often as not): it is not known to be level.
-        sliding = on_level(surface, near, up) & (surface(near)[2] >= MIN_FLATNESS)
+        sliding = on_level(surface, near, up)
     best = None
     for refined in refined_motions:
         claimed = on_near.claimed(refined, ego) & ~sliding
