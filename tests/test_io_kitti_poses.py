@@ -6,6 +6,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from mmreg import SequenceRegistration
+from mmreg._validation import check_ego_motion
 from mmreg.datasets import open_sequence
 from mmreg.io import read_kitti_poses, write_kitti_poses
 
@@ -101,9 +103,6 @@ def test_every_input_takes_the_same_rotations(tmp_path_factory, rotvec, stretch,
     # An ego motion, a log's poses and a KITTI pose file accept the same matrices: a
     # rotation scaled by 1 +- 1e-5 (R^T R off by 2e-5), not one scaled by 1 +- 1e-3 (2e-3)
     # nor a mirror.
-    from mmreg import SequenceRegistration
-    from mmreg._validation import check_ego_motion
-
     rotation = Rotation.from_rotvec(rotvec).as_matrix() * (1.0 + stretch)
     if mirrored:
         rotation = rotation @ np.diag([1.0, 1.0, -1.0])
